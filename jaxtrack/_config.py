@@ -1,0 +1,32 @@
+"""Numerical precision policy.
+
+jaxtrack switches JAX to 64-bit floats when it is imported, because several of the reference
+studies lose their meaning in float32 (the pseudo-linear bearings-only filter of
+``specs/bearings-tma.md`` §6 produces indefinite covariances and errors of hundreds of km; Ho's
+covariances span 1e-2 to 1e6 ft² in one matrix).
+
+To opt out, set the environment variable ``JAXTRACK_ENABLE_X64=0`` *before* importing jaxtrack
+(then JAX's own ``JAX_ENABLE_X64`` setting is left as it is), or call
+``jax.config.update("jax_enable_x64", False)`` after the import. Every function in the library
+follows the dtype of its inputs, so float32 works wherever the arithmetic allows it.
+"""
+
+from __future__ import annotations
+
+import os
+
+import jax
+
+_OPT_OUT_VALUES = {"0", "false", "no", "off"}
+
+
+def _enable_x64_by_default() -> bool:
+    """Turn on float64 unless the user opted out; returns whether it is on."""
+    if os.environ.get("JAXTRACK_ENABLE_X64", "1").strip().lower() not in _OPT_OUT_VALUES:
+        jax.config.update("jax_enable_x64", True)
+    return bool(jax.config.jax_enable_x64)
+
+
+def float_dtype():
+    """The default float dtype under the current JAX configuration (float64 or float32)."""
+    return jax.numpy.float64 if jax.config.jax_enable_x64 else jax.numpy.float32

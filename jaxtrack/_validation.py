@@ -1,0 +1,101 @@
+"""Input checks for the public entry points.
+
+Every check names the offending argument and says what was expected. Shape checks always run
+(shapes are static under ``jit``). Value checks (finite, symmetric, positive definite) run only
+when the value is concrete; under ``jit``/``vmap``/``grad`` tracing they are skipped, because a
+traced value cannot be inspected without a host round-trip. Entry points that run under tracing
+rely on the filter's own run-time status instead (``FilterResult.ok`` and ``throw=True``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+class InputError(ValueError):
+    """Raised when an argument to a jaxtrack entry point has the wrong shape or value."""
+
+
+def is_concrete(x) -> bool:
+    """True when ``x`` holds a value that can be inspected now (not a tracer)."""
+    return not isinstance(x, jax.core.Tracer)
+
+
+def _describe_shape(shape: Sequence[int | None]) -> str:
+    return "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
+
+
+def check_shape(name: str, x, shapes: Sequence[Sequence[int | None]]) -> None:
+    """Raise unless ``x.shape`` matches one of ``shapes`` (``None`` matches any size)."""
+    actual = tuple(jnp.shape(x))
+    for shape in shapes:
+        if len(shape) == len(actual) and all(s is None or s == a for s, a in zip(shape, actual)):
+            return
+    expected = " or ".join(_describe_shape(s) for s in shapes)
+    raise InputError(f"`{name}` must have shape {expected}; got shape {actual}.")
+
+
+def check_finite(name: str, x) -> None:
+    """Raise if a concrete ``x`` has a NaN or infinite entry."""
+    if not is_concrete(x):
+        return
+    arr = np.asarray(x)
+    if not np.all(np.isfinite(arr)):
+        bad = np.argwhere(~np.isfinite(arr))
+        first = tuple(int(i) for i in bad[0])
+        raise InputError(
+            f"`{name}` must be finite; it has {len(bad)} non-finite entries "
+            f"(first at index {first}: {arr[first]})."
+        )
+
+
+def _last_two(x):
+    arr = np.asarray(x)
+    return arr.reshape((-1,) + arr.shape[-2:])
+
+
+def check_symmetric(name: str, x, rtol: float = 1e-8) -> None:
+    """Raise if a concrete matrix (or stack of matrices) is not symmetric to ``rtol``."""
+    if not is_concrete(x):
+        return
+    for i, m in enumerate(_last_two(x)):
+        scale = max(float(np.max(np.abs(m))), np.finfo(m.dtype).tiny)
+        asym = float(np.max(np.abs(m - m.T)))
+        if asym > rtol * scale:
+            where = "" if np.ndim(x) == 2 else f" (matrix {i} of the stack)"
+            raise InputError(
+                f"`{name}` must be a symmetric covariance matrix{where}; "
+                f"max |A - A^T| = {asym:.3g} against max |A| = {scale:.3g}."
+            )
+
+
+def check_covariance(name: str, x, *, definite: bool = True) -> None:
+    """Raise unless ``x`` is a finite symmetric positive (semi)definite matrix or stack of them.
+
+    ``definite=False`` accepts singular covariances (e.g. a plant noise acting on one state only);
+    it still rejects eigenvalues below ``-1e-10·max|A|``.
+    """
+    check_finite(name, x)
+    check_symmetric(name, x)
+    if not is_concrete(x):
+        return
+    for i, m in enumerate(_last_two(x)):
+        m = np.asarray(m, dtype=np.float64)
+        eig = np.linalg.eigvalsh(0.5 * (m + m.T))
+        scale = max(float(np.max(np.abs(m))), np.finfo(np.float64).tiny)
+        where = "" if np.ndim(x) == 2 else f" (matrix {i} of the stack)"
+        if definite and eig[0] <= 0.0:
+            raise InputError(
+                f"`{name}` must be positive definite{where}; its smallest eigenvalue is "
+                f"{eig[0]:.3g}. Check units (e.g. variances in m², rad²) and that no "
+                f"standard deviation is zero."
+            )
+        if not definite and eig[0] < -1e-10 * scale:
+            raise InputError(
+                f"`{name}` must be positive semidefinite{where}; its smallest eigenvalue is "
+                f"{eig[0]:.3g}."
+            )

@@ -1,0 +1,367 @@
+"""State-space models as equinox Modules.
+
+Conventions used everywhere in jaxtrack
+--------------------------------------
+A model describes, for measurement steps ``k = 0, …, T-1``,
+
+.. math::
+
+    x_k = f_k(x_{k-1}) + w_k,\\quad w_k \\sim N(0, Q_k)
+    \\qquad z_k = h_k(x_k) + v_k,\\quad v_k \\sim N(0, R_k)
+
+with a Gaussian prior ``N(initial_mean, initial_cov)``.
+
+*Every per-step quantity is indexed by the measurement step it leads into*: ``F[k]``, ``Q[k]`` and a
+sampling period ``tau[k]`` describe the interval that **ends** at measurement ``k``. Where the prior
+sits is chosen by the filter's ``first_step`` argument (see :func:`jaxtrack.filters.run_filter`):
+
+- ``first_step="update"`` (default; Ho 1968, dynamax): the prior is on ``x_0``, the state at the
+  first measurement. ``F[0]``, ``Q[0]`` and ``tau[0]`` are not used.
+- ``first_step="predict"`` (FilterPy's ``predict(); update(z)`` loop): the prior is on ``x_{-1}``,
+  one transition before the first measurement, and ``F[0]``, ``Q[0]`` take it to ``x_0``.
+
+Matrices may be constant, shape ``(n, n)``, or given per step, shape ``(T, n, n)``; the step index
+``k`` picks the right one inside the scan. Everything that a researcher may differentiate (τ, Q, R,
+the prior, biases) is an array leaf of the Module; static fields hold sizes and flags only.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from .._validation import InputError, check_covariance, check_finite, check_shape
+
+
+def wrap_angle(angle: ArrayLike) -> Array:
+    """Wrap an angle (radians) to the interval (−π, π].
+
+    Written with ``jnp.where`` so the derivative is 1 everywhere except at the wrap point.
+    """
+    angle = jnp.asarray(angle)
+    wrapped = jnp.remainder(angle + jnp.pi, 2 * jnp.pi) - jnp.pi
+    # remainder maps +π to −π; the convention for bearings is (−π, π].
+    return jnp.where(wrapped == -jnp.pi, jnp.pi, wrapped)
+
+
+def at_step(a: Array, k, matrix_ndim: int) -> Array:
+    """Return ``a`` if it is constant (``a.ndim == matrix_ndim``) or ``a[k]`` if given per step."""
+    return a if a.ndim == matrix_ndim else a[k]
+
+
+def _num_steps_of(*arrays_and_ndims) -> int | None:
+    steps = {a.shape[0] for a, nd in arrays_and_ndims if a is not None and a.ndim == nd + 1}
+    if len(steps) > 1:
+        raise InputError(f"per-step model arrays disagree on the number of steps: {sorted(steps)}.")
+    return steps.pop() if steps else None
+
+
+class AbstractStateSpaceModel(eqx.Module):
+    """Base class of every state-space model: a Gaussian prior, dynamics and a measurement model.
+
+    Subclasses provide :meth:`transition`, :meth:`measurement`, :meth:`process_noise_cov` and
+    :meth:`measurement_noise_cov`. The Jacobians default to ``jax.jacfwd`` of the mean functions;
+    a subclass may override them with analytic ones. :meth:`residual` subtracts measurements and
+    wraps the components listed in ``angle_components`` to (−π, π].
+
+    To write your own nonlinear model, subclass this and implement the four methods as ordinary
+    methods (not lambdas in fields), so that rebuilding the model does not recompile.
+    """
+
+    initial_mean: eqx.AbstractVar[Float[Array, " n"]]
+    initial_cov: eqx.AbstractVar[Float[Array, "n n"]]
+    angle_components: eqx.AbstractVar[tuple[int, ...]]
+
+    @abc.abstractmethod
+    def transition(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, " n"]:
+        """Mean of ``x_k`` given ``x_{k-1} = x``: ``f_k(x)``."""
+
+    @abc.abstractmethod
+    def measurement(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, " m"]:
+        """Mean of ``z_k`` given ``x_k = x``: ``h_k(x)``."""
+
+    @abc.abstractmethod
+    def process_noise_cov(self, k: Int[Array, ""]) -> Float[Array, "n n"]:
+        """``Q_k``, the covariance of the plant noise on the interval ending at step ``k``."""
+
+    @abc.abstractmethod
+    def measurement_noise_cov(self, k: Int[Array, ""]) -> Float[Array, "m m"]:
+        """``R_k``, the measurement-noise covariance at step ``k``."""
+
+    @property
+    @abc.abstractmethod
+    def num_steps(self) -> int | None:
+        """Number of steps the per-step arrays cover, or ``None`` if the model is time-invariant."""
+
+    def transition_jacobian(self, x: Float[Array, " n"], k) -> Float[Array, "n n"]:
+        """``Φ_k = ∂f_k/∂x`` at ``x`` (by ``jax.jacfwd`` unless overridden)."""
+        return jax.jacfwd(self.transition)(x, k)
+
+    def measurement_jacobian(self, x: Float[Array, " n"], k) -> Float[Array, "m n"]:
+        """``H_k = ∂h_k/∂x`` at ``x`` (by ``jax.jacfwd`` unless overridden)."""
+        return jax.jacfwd(self.measurement)(x, k)
+
+    def residual(self, z: Float[Array, " m"], z_pred: Float[Array, " m"]) -> Float[Array, " m"]:
+        """``z − ẑ`` with the components in ``angle_components`` wrapped to (−π, π]."""
+        diff = z - z_pred
+        if not self.angle_components:
+            return diff
+        idx = jnp.asarray(self.angle_components)
+        return diff.at[idx].set(wrap_angle(diff[idx]))
+
+    @property
+    def state_dim(self) -> int:
+        return self.initial_mean.shape[-1]
+
+    @property
+    def meas_dim(self) -> int:
+        return self.measurement_noise_cov(0).shape[-1]
+
+
+class LinearGaussianModel(AbstractStateSpaceModel):
+    r"""Linear-Gaussian model ``x_k = F_k x_{k-1} + b_k + w_k``, ``z_k = H_k x_k + v_k``.
+
+    **Arguments** (``n`` states, ``m`` measurement components, ``T`` steps when per-step):
+
+    - ``transition_matrix``: ``F``, shape ``(n, n)`` or ``(T, n, n)``. ``F[k]`` maps the state at
+      step ``k-1`` to step ``k`` (the paper's Φ_{k-1}).
+    - ``process_noise_cov``: ``Q``, shape ``(n, n)`` or ``(T, n, n)``, positive semidefinite.
+    - ``measurement_matrix``: ``H``, shape ``(m, n)`` or ``(T, m, n)``.
+    - ``measurement_noise_cov``: ``R``, shape ``(m, m)`` or ``(T, m, m)``, positive definite.
+    - ``initial_mean``, ``initial_cov``: the prior, shapes ``(n,)`` and ``(n, n)``; where it sits
+      (at the first measurement or one step before) is set by the filter's ``first_step``.
+    - ``transition_offset``: optional known input ``b``, shape ``(n,)`` or ``(T, n)`` (e.g. the
+      observer's displacement in a relative-state bearings-only model).
+    - ``angle_components``: indices of measurement components that are angles (radians); their
+      residuals are wrapped to (−π, π].
+
+    Units are the caller's; the library only requires them to be consistent (SI and radians in
+    all built-in models, except Ho's plant in feet).
+
+    The arrays are stored as the fields ``F``, ``Q``, ``H``, ``R`` and ``b``; read them per step
+    with :meth:`transition_matrix`, :meth:`process_noise_cov`, :meth:`measurement_matrix` and
+    :meth:`measurement_noise_cov`. All arrays are leaves, so ``jax.grad`` with respect to any of them (or to a sampling schedule
+    that built them) works. Values are checked at construction when they are concrete.
+    """
+
+    F: Float[Array, "*T n n"]
+    Q: Float[Array, "*T n n"]
+    H: Float[Array, "*T m n"]
+    R: Float[Array, "*T m m"]
+    initial_mean: Float[Array, " n"]
+    initial_cov: Float[Array, "n n"]
+    b: Float[Array, "*T n"] | None
+    angle_components: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(
+        self,
+        transition_matrix: ArrayLike,
+        process_noise_cov: ArrayLike,
+        measurement_matrix: ArrayLike,
+        measurement_noise_cov: ArrayLike,
+        initial_mean: ArrayLike,
+        initial_cov: ArrayLike,
+        *,
+        transition_offset: ArrayLike | None = None,
+        angle_components: tuple[int, ...] = (),
+    ):
+        F = jnp.asarray(transition_matrix)
+        Q = jnp.asarray(process_noise_cov)
+        H = jnp.asarray(measurement_matrix)
+        R = jnp.asarray(measurement_noise_cov)
+        m0 = jnp.asarray(initial_mean)
+        P0 = jnp.asarray(initial_cov)
+        dtype = jnp.result_type(F, Q, H, R, m0, P0, float)
+        F, Q, H, R, m0, P0 = (a.astype(dtype) for a in (F, Q, H, R, m0, P0))
+
+        check_shape("initial_mean", m0, [(None,)])
+        n = m0.shape[0]
+        check_shape("initial_cov", P0, [(n, n)])
+        check_shape("transition_matrix", F, [(n, n), (None, n, n)])
+        check_shape("process_noise_cov", Q, [(n, n), (None, n, n)])
+        check_shape("measurement_matrix", H, [(None, n), (None, None, n)])
+        m = H.shape[-2]
+        check_shape("measurement_noise_cov", R, [(m, m), (None, m, m)])
+        b = None
+        if transition_offset is not None:
+            b = jnp.asarray(transition_offset).astype(dtype)
+            check_shape("transition_offset", b, [(n,), (None, n)])
+        for idx in angle_components:
+            if not 0 <= idx < m:
+                raise InputError(f"`angle_components` entry {idx} is not a measurement index (m = {m}).")
+
+        check_finite("initial_mean", m0)
+        check_covariance("initial_cov", P0)
+        check_finite("transition_matrix", F)
+        check_covariance("process_noise_cov", Q, definite=False)
+        check_finite("measurement_matrix", H)
+        check_covariance("measurement_noise_cov", R)
+        if b is not None:
+            check_finite("transition_offset", b)
+
+        self.F = F
+        self.Q = Q
+        self.H = H
+        self.R = R
+        self.initial_mean = m0
+        self.initial_cov = P0
+        self.b = b
+        self.angle_components = tuple(int(i) for i in angle_components)
+        _num_steps_of((F, 2), (Q, 2), (H, 2), (R, 2), (b, 1))
+
+    @property
+    def num_steps(self) -> int | None:
+        return _num_steps_of(
+            (self.F, 2),
+            (self.Q, 2),
+            (self.H, 2),
+            (self.R, 2),
+            (self.b, 1),
+        )
+
+    @property
+    def meas_dim(self) -> int:
+        return self.H.shape[-2]
+
+    def transition_matrix(self, k) -> Float[Array, "n n"]:
+        """``F_k``: maps the state at step ``k-1`` to step ``k``."""
+        return at_step(self.F, k, 2)
+
+    def measurement_matrix(self, k) -> Float[Array, "m n"]:
+        """``H_k``."""
+        return at_step(self.H, k, 2)
+
+    def process_noise_cov(self, k) -> Float[Array, "n n"]:
+        return at_step(self.Q, k, 2)
+
+    def measurement_noise_cov(self, k) -> Float[Array, "m m"]:
+        return at_step(self.R, k, 2)
+
+    def transition(self, x, k):
+        fx = self.transition_matrix(k) @ x
+        if self.b is not None:
+            fx = fx + at_step(self.b, k, 1)
+        return fx
+
+    def measurement(self, x, k):
+        return self.measurement_matrix(k) @ x
+
+    # Linear: the Jacobians are the matrices themselves (jacfwd would give the same, at n JVPs).
+    def transition_jacobian(self, x, k):
+        return self.transition_matrix(k)
+
+    def measurement_jacobian(self, x, k):
+        return self.measurement_matrix(k)
+
+
+class NonlinearGaussianModel(AbstractStateSpaceModel):
+    r"""Nonlinear model with additive Gaussian noise from user callables.
+
+    ``x_k = f(x_{k-1}, k) + w_k``, ``z_k = h(x_k, k) + v_k``.
+
+    **Arguments:**
+
+    - ``transition_fn``: ``f(x, k) -> x'``, shapes ``(n,), () -> (n,)``.
+    - ``measurement_fn``: ``h(x, k) -> z``, shapes ``(n,), () -> (m,)``.
+    - ``process_noise_cov``: ``Q``, shape ``(n, n)`` or ``(T, n, n)``.
+    - ``measurement_noise_cov``: ``R``, shape ``(m, m)`` or ``(T, m, m)``.
+    - ``initial_mean``, ``initial_cov``: the prior, shapes ``(n,)`` and ``(n, n)``.
+    - ``transition_jacobian_fn``, ``measurement_jacobian_fn``: optional analytic Jacobians with the
+      same signature as ``f`` and ``h``; ``jax.jacfwd`` is used when they are not given.
+    - ``angle_components``: measurement indices that are angles (radians), wrapped to (−π, π].
+
+    !!! note
+        The callables are compared by identity under ``jit``: define them once (a ``def`` at
+        module level), not as a fresh ``lambda`` per call, or every call recompiles. For a model
+        with parameters you want to differentiate, subclass :class:`AbstractStateSpaceModel`
+        instead and keep the parameters as array fields.
+    """
+
+    transition_fn: Callable = eqx.field(static=True)
+    measurement_fn: Callable = eqx.field(static=True)
+    Q: Float[Array, "*T n n"]
+    R: Float[Array, "*T m m"]
+    initial_mean: Float[Array, " n"]
+    initial_cov: Float[Array, "n n"]
+    transition_jacobian_fn: Callable | None = eqx.field(static=True)
+    measurement_jacobian_fn: Callable | None = eqx.field(static=True)
+    angle_components: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(
+        self,
+        transition_fn: Callable,
+        measurement_fn: Callable,
+        process_noise_cov: ArrayLike,
+        measurement_noise_cov: ArrayLike,
+        initial_mean: ArrayLike,
+        initial_cov: ArrayLike,
+        *,
+        transition_jacobian_fn: Callable | None = None,
+        measurement_jacobian_fn: Callable | None = None,
+        angle_components: tuple[int, ...] = (),
+    ):
+        Q = jnp.asarray(process_noise_cov)
+        R = jnp.asarray(measurement_noise_cov)
+        m0 = jnp.asarray(initial_mean)
+        P0 = jnp.asarray(initial_cov)
+        dtype = jnp.result_type(Q, R, m0, P0, float)
+        Q, R, m0, P0 = (a.astype(dtype) for a in (Q, R, m0, P0))
+        for name, fn in (("transition_fn", transition_fn), ("measurement_fn", measurement_fn)):
+            if not callable(fn):
+                raise InputError(f"`{name}` must be a callable f(x, k); got {type(fn).__name__}.")
+        check_shape("initial_mean", m0, [(None,)])
+        n = m0.shape[0]
+        check_shape("initial_cov", P0, [(n, n)])
+        check_shape("process_noise_cov", Q, [(n, n), (None, n, n)])
+        check_shape("measurement_noise_cov", R, [(None, None), (None, None, None)])
+        if R.shape[-1] != R.shape[-2]:
+            raise InputError(f"`measurement_noise_cov` must be square; got shape {R.shape}.")
+        check_finite("initial_mean", m0)
+        check_covariance("initial_cov", P0)
+        check_covariance("process_noise_cov", Q, definite=False)
+        check_covariance("measurement_noise_cov", R)
+        m = R.shape[-1]
+        for idx in angle_components:
+            if not 0 <= idx < m:
+                raise InputError(f"`angle_components` entry {idx} is not a measurement index (m = {m}).")
+        self.transition_fn = transition_fn
+        self.measurement_fn = measurement_fn
+        self.Q = Q
+        self.R = R
+        self.initial_mean = m0
+        self.initial_cov = P0
+        self.transition_jacobian_fn = transition_jacobian_fn
+        self.measurement_jacobian_fn = measurement_jacobian_fn
+        self.angle_components = tuple(int(i) for i in angle_components)
+        _num_steps_of((Q, 2), (R, 2))
+
+    @property
+    def num_steps(self) -> int | None:
+        return _num_steps_of((self.Q, 2), (self.R, 2))
+
+    def transition(self, x, k):
+        return self.transition_fn(x, k)
+
+    def measurement(self, x, k):
+        return self.measurement_fn(x, k)
+
+    def process_noise_cov(self, k):
+        return at_step(self.Q, k, 2)
+
+    def measurement_noise_cov(self, k):
+        return at_step(self.R, k, 2)
+
+    def transition_jacobian(self, x, k):
+        if self.transition_jacobian_fn is not None:
+            return self.transition_jacobian_fn(x, k)
+        return jax.jacfwd(self.transition_fn)(x, k)
+
+    def measurement_jacobian(self, x, k):
+        if self.measurement_jacobian_fn is not None:
+            return self.measurement_jacobian_fn(x, k)
+        return jax.jacfwd(self.measurement_fn)(x, k)
