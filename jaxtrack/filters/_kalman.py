@@ -1,0 +1,90 @@
+"""Kalman filter (Joseph form, optional external gain) and extended Kalman filter."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from .._validation import InputError, check_finite, check_shape
+from ..models import LinearGaussianModel, at_step
+from ._base import AbstractFilter, condition_linearized
+
+
+def _predict_linearized(model, mean, cov, k, jacobian):
+    Q = model.process_noise_cov(k)
+    return model.transition(mean, k), jacobian @ cov @ jacobian.T + Q
+
+
+class KalmanFilter(AbstractFilter):
+    r"""Linear Kalman filter with the Joseph-form covariance update.
+
+    .. math::
+
+        x̂_{k/k-1} = F_k x̂_{k-1/k-1} + b_k,\qquad P_{k/k-1} = F_k P_{k-1/k-1} F_kᵀ + Q_k
+
+        W_k = P_{k/k-1} H_kᵀ (H_k P_{k/k-1} H_kᵀ + R_k)^{-1}
+
+        P_{k/k} = (I − W_k H_k) P_{k/k-1} (I − W_k H_k)ᵀ + W_k R_k W_kᵀ
+
+    (Ho 1968, eqs. (2)–(4)). The Joseph form is exact for any gain, so a suboptimal gain
+    supplied through ``gain`` gives the *actual* error covariance of that filter, provided the
+    model holds the true noise covariances.
+
+    **Arguments:**
+
+    - ``gain``: optional fixed gain ``W``, shape ``(n, m)`` or per step ``(T, n, m)``. When given,
+      it replaces the optimal gain (columns of missing components are zeroed). It is an array leaf,
+      so ``jax.grad`` with respect to it works.
+
+    Requires a :class:`~jaxtrack.models.LinearGaussianModel`.
+    """
+
+    gain: Float[Array, "*T n m"] | None = None
+
+    def __init__(self, gain: ArrayLike | None = None):
+        if gain is not None:
+            gain = jnp.asarray(gain)
+            check_shape("gain", gain, [(None, None), (None, None, None)])
+            check_finite("gain", gain)
+        self.gain = gain
+
+    def check_model(self, model):
+        if not isinstance(model, LinearGaussianModel):
+            raise InputError(
+                f"KalmanFilter needs a LinearGaussianModel; got {type(model).__name__}. "
+                f"Use ExtendedKalmanFilter or UnscentedKalmanFilter for nonlinear models."
+            )
+        if self.gain is not None:
+            n, m = model.state_dim, model.meas_dim
+            check_shape("gain", self.gain, [(n, m), (None, n, m)])
+
+    def predict(self, model, mean, cov, k):
+        return _predict_linearized(model, mean, cov, k, model.transition_matrix(k))
+
+    def update(self, model, mean, cov, z, observed, k):
+        H = model.measurement_matrix(k)
+        gain = None if self.gain is None else at_step(self.gain, k, 2)
+        return condition_linearized(
+            mean, cov, z - H @ mean, H, model.measurement_noise_cov(k), observed, gain
+        )
+
+
+class ExtendedKalmanFilter(AbstractFilter):
+    r"""Extended Kalman filter (first order), Joseph-form update.
+
+    Linearises ``f`` at ``x̂_{k-1/k-1}`` and ``h`` at ``x̂_{k/k-1}`` (Ho 1968, eq. (2) and App. A)
+    with the model's Jacobians (``jax.jacfwd`` unless the model supplies them). The innovation is
+    ``model.residual(z, h(x̂))``, so angle components wrap to (−π, π]. On a linear model it is the
+    Kalman filter.
+    """
+
+    def predict(self, model, mean, cov, k):
+        return _predict_linearized(model, mean, cov, k, model.transition_jacobian(mean, k))
+
+    def update(self, model, mean, cov, z, observed, k):
+        H = model.measurement_jacobian(mean, k)
+        innovation = model.residual(z, model.measurement(mean, k))
+        return condition_linearized(
+            mean, cov, innovation, H, model.measurement_noise_cov(k), observed
+        )
