@@ -1,0 +1,134 @@
+"""Simulation of truth and measurements from a state-space model and a PRNG key."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from .._validation import InputError
+from ..filters._base import FirstStep
+from ..models import AbstractStateSpaceModel, at_step
+
+
+class Trajectory(NamedTuple):
+    """One simulated run: ``states`` ``(T, n)`` and ``measurements`` ``(T, m)``."""
+
+    states: Float[Array, "T n"]
+    measurements: Float[Array, "T m"]
+
+
+def psd_sqrt(cov: Array) -> Array:
+    """A factor ``L`` with ``L Lᵀ = cov`` for a positive *semi*definite ``cov``.
+
+    Plant noise is often singular (noise on the velocity only), where a Cholesky factor is NaN;
+    the symmetric eigendecomposition handles it. Tiny negative eigenvalues from rounding clip to 0.
+    """
+    eigvals, eigvecs = jnp.linalg.eigh(cov)
+    return eigvecs * jnp.sqrt(jnp.clip(eigvals, 0.0))[..., None, :]
+
+
+class NoiseFactors(NamedTuple):
+    """Square-root noise factors, constant ``(n, n)`` or per step ``(T, n, n)``, and the prior's."""
+
+    process: Array
+    measurement: Array
+    prior: Array
+
+
+def noise_factors(model: AbstractStateSpaceModel, num_steps: int) -> NoiseFactors:
+    """Factor Q, R and the prior covariance once, outside the per-run scan."""
+    if model.num_steps is None:
+        Lq = psd_sqrt(model.process_noise_cov(0))
+        Lr = psd_sqrt(model.measurement_noise_cov(0))
+    else:
+        ks = jnp.arange(num_steps)
+        Lq = jax.vmap(lambda k: psd_sqrt(model.process_noise_cov(k)))(ks)
+        Lr = jax.vmap(lambda k: psd_sqrt(model.measurement_noise_cov(k)))(ks)
+    return NoiseFactors(Lq, Lr, psd_sqrt(model.initial_cov))
+
+
+def step_keys(key: PRNGKeyArray) -> tuple[PRNGKeyArray, PRNGKeyArray]:
+    """Split a run's key into the prior-draw key and the base key of the per-step draws."""
+    prior_key, steps_key = jax.random.split(key)
+    return prior_key, steps_key
+
+
+def draw_initial_state(model, factors: NoiseFactors, prior_key) -> Array:
+    n = model.state_dim
+    eps = jax.random.normal(prior_key, (n,), model.initial_mean.dtype)
+    return model.initial_mean + factors.prior @ eps
+
+
+def simulate_step(model, factors: NoiseFactors, first_step: FirstStep, x_prev, steps_key, k):
+    """Draw ``x_k`` from ``x_{k-1}`` and then ``z_k``; step ``k``'s draws use ``fold_in(key, k)``."""
+    dtype = model.initial_mean.dtype
+    kw, kv = jax.random.split(jax.random.fold_in(steps_key, k))
+    w = at_step(factors.process, k, 2) @ jax.random.normal(kw, (model.state_dim,), dtype)
+    x = model.transition(x_prev, k) + w
+    if first_step == "update":
+        # The prior is on x_0 itself: no transition into step 0.
+        x = jnp.where(k == 0, x_prev, x)
+    v = at_step(factors.measurement, k, 2) @ jax.random.normal(kv, (model.meas_dim,), dtype)
+    return x, model.measurement(x, k) + v
+
+
+@eqx.filter_jit
+def _simulate_jit(model, key, num_steps, first_step):
+    factors = noise_factors(model, num_steps)
+    prior_key, steps_key = step_keys(key)
+    x0 = draw_initial_state(model, factors, prior_key)
+
+    def step(x_prev, k):
+        x, z = simulate_step(model, factors, first_step, x_prev, steps_key, k)
+        return x, (x, z)
+
+    _, (xs, zs) = jax.lax.scan(step, x0, jnp.arange(num_steps))
+    return Trajectory(xs, zs)
+
+
+def simulate(
+    model: AbstractStateSpaceModel,
+    key: PRNGKeyArray,
+    num_steps: int | None = None,
+    *,
+    first_step: FirstStep = "update",
+) -> Trajectory:
+    """Simulate one run of truth and measurements.
+
+    The initial state is drawn from the model's prior ``N(initial_mean, initial_cov)``; with
+    ``first_step="update"`` that draw *is* ``x_0``, with ``"predict"`` it is ``x_{-1}`` and
+    ``x_0 = f_0(x_{-1}) + w_0`` (the same conventions as :func:`jaxtrack.filters.run_filter`).
+
+    Step ``k``'s noise comes from ``jax.random.fold_in(key_steps, k)``, so a trajectory does not
+    depend on how many steps are simulated after it, and the Monte Carlo harness reproduces it
+    exactly for the same run key.
+
+    **Arguments:** ``model``; ``key``, a PRNG key; ``num_steps`` ``T`` (defaults to the model's
+    per-step length); ``first_step`` as in ``run_filter``.
+
+    **Returns:** a :class:`Trajectory` with ``states`` ``(T, n)`` and ``measurements`` ``(T, m)``.
+    Use ``jax.vmap`` over keys for a batch.
+    """
+    num_steps = _resolve_num_steps(model, num_steps)
+    if first_step not in ("update", "predict"):
+        raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
+    return _simulate_jit(model, key, num_steps, first_step)
+
+
+def _resolve_num_steps(model, num_steps) -> int:
+    model_steps = model.num_steps
+    if num_steps is None:
+        if model_steps is None:
+            raise InputError("`num_steps` is required for a time-invariant model.")
+        return model_steps
+    if not isinstance(num_steps, int) or num_steps < 1:
+        raise InputError(f"`num_steps` must be a positive int; got {num_steps!r}.")
+    if model_steps is not None and model_steps != num_steps:
+        raise InputError(
+            f"`num_steps` is {num_steps} but the model's per-step arrays have {model_steps} steps."
+        )
+    return num_steps
