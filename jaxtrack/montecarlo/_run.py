@@ -243,6 +243,8 @@ def monte_carlo(
                 sums, jnp.asarray(start), key, filter, filter_model, truth, observed,
                 first_step, chunk_size, num_runs,
             )
+            # Wait for the chunk, so the bar reports finished runs rather than dispatched ones.
+            sums = jax.block_until_ready(sums)
             bar.update(min(chunk_size, num_runs - start))
     return _summarize(sums, observed, n, confidence)
 
