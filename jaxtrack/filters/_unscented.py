@@ -58,8 +58,8 @@ class UnscentedKalmanFilter(AbstractFilter):
         points, wm, wc = self._sigma_points(mean, cov)
         propagated = jax.vmap(model.transition, in_axes=(0, None))(points, k)
         pred_mean = wm @ propagated
-        dev = propagated - pred_mean
-        pred_cov = (dev.T * wc) @ dev + model.process_noise_cov(k)
+        dev = propagated - pred_mean[None, :]
+        pred_cov = (dev.T * wc[None, :]) @ dev + model.process_noise_cov(k)
         # Σ w dev devᵀ is symmetric in exact arithmetic; rounding in the weighted product is not.
         return pred_mean, symmetrize(pred_cov)
 
@@ -70,9 +70,9 @@ class UnscentedKalmanFilter(AbstractFilter):
         # wrapped angles average on the circle.
         z_dev0 = jax.vmap(model.residual, in_axes=(0, None))(z_points, z_points[0])
         z_pred_offset = wm @ z_dev0
-        z_dev = z_dev0 - z_pred_offset
-        x_dev = points - mean
-        S = (z_dev.T * wc) @ z_dev + model.measurement_noise_cov(k)
-        C = (x_dev.T * wc) @ z_dev
+        z_dev = z_dev0 - z_pred_offset[None, :]
+        x_dev = points - mean[None, :]
+        S = (z_dev.T * wc[None, :]) @ z_dev + model.measurement_noise_cov(k)
+        C = (x_dev.T * wc[None, :]) @ z_dev
         innovation = model.residual(z, z_points[0]) - z_pred_offset
         return condition_on_moments(mean, cov, innovation, S, C, observed)
