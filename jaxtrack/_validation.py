@@ -58,44 +58,54 @@ def _last_two(x):
     return arr.reshape((-1,) + arr.shape[-2:])
 
 
+def _matrix_label(x, i) -> str:
+    return "" if np.ndim(x) == 2 else f" (matrix {i} of the stack)"
+
+
 def check_symmetric(name: str, x, rtol: float = 1e-8) -> None:
     """Raise if a concrete matrix (or stack of matrices) is not symmetric to ``rtol``."""
     if not is_concrete(x):
         return
-    for i, m in enumerate(_last_two(x)):
-        scale = max(float(np.max(np.abs(m))), np.finfo(m.dtype).tiny)
-        asym = float(np.max(np.abs(m - m.T)))
-        if asym > rtol * scale:
-            where = "" if np.ndim(x) == 2 else f" (matrix {i} of the stack)"
-            raise InputError(
-                f"`{name}` must be a symmetric covariance matrix{where}; "
-                f"max |A - A^T| = {asym:.3g} against max |A| = {scale:.3g}."
-            )
+    stack = _last_two(x)
+    scale = np.maximum(np.max(np.abs(stack), axis=(-1, -2)), np.finfo(stack.dtype).tiny)
+    asym = np.max(np.abs(stack - np.swapaxes(stack, -1, -2)), axis=(-1, -2))
+    bad = np.flatnonzero(asym > rtol * scale)
+    if bad.size:
+        i = int(bad[0])
+        raise InputError(
+            f"`{name}` must be a symmetric covariance matrix{_matrix_label(x, i)}; "
+            f"max |A - A^T| = {asym[i]:.3g} against max |A| = {scale[i]:.3g}."
+        )
 
 
 def check_covariance(name: str, x, *, definite: bool = True) -> None:
     """Raise unless ``x`` is a finite symmetric positive (semi)definite matrix or stack of them.
 
     ``definite=False`` accepts singular covariances (e.g. a plant noise acting on one state only);
-    it still rejects eigenvalues below ``-1e-10·max|A|``.
+    it still rejects eigenvalues below ``-1e-10·max|A|``. Stacks are checked in one batched
+    eigendecomposition, so a per-step model of many steps validates quickly.
     """
     check_finite(name, x)
     check_symmetric(name, x)
     if not is_concrete(x):
         return
-    for i, m in enumerate(_last_two(x)):
-        m = np.asarray(m, dtype=np.float64)
-        eig = np.linalg.eigvalsh(0.5 * (m + m.T))
-        scale = max(float(np.max(np.abs(m))), np.finfo(np.float64).tiny)
-        where = "" if np.ndim(x) == 2 else f" (matrix {i} of the stack)"
-        if definite and eig[0] <= 0.0:
+    stack = _last_two(x).astype(np.float64)
+    smallest = np.linalg.eigvalsh(0.5 * (stack + np.swapaxes(stack, -1, -2)))[:, 0]
+    scale = np.maximum(np.max(np.abs(stack), axis=(-1, -2)), np.finfo(np.float64).tiny)
+    if definite:
+        bad = np.flatnonzero(smallest <= 0.0)
+        if bad.size:
+            i = int(bad[0])
             raise InputError(
-                f"`{name}` must be positive definite{where}; its smallest eigenvalue is "
-                f"{eig[0]:.3g}. Check units (e.g. variances in m², rad²) and that no "
+                f"`{name}` must be positive definite{_matrix_label(x, i)}; its smallest eigenvalue "
+                f"is {smallest[i]:.3g}. Check units (e.g. variances in m², rad²) and that no "
                 f"standard deviation is zero."
             )
-        if not definite and eig[0] < -1e-10 * scale:
+    else:
+        bad = np.flatnonzero(smallest < -1e-10 * scale)
+        if bad.size:
+            i = int(bad[0])
             raise InputError(
-                f"`{name}` must be positive semidefinite{where}; its smallest eigenvalue is "
-                f"{eig[0]:.3g}."
+                f"`{name}` must be positive semidefinite{_matrix_label(x, i)}; its smallest "
+                f"eigenvalue is {smallest[i]:.3g}."
             )

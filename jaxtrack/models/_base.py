@@ -54,11 +54,17 @@ def at_step(a: Array, k, matrix_ndim: int) -> Array:
     return a if a.ndim == matrix_ndim else a[k]
 
 
-def _num_steps_of(*arrays_and_ndims) -> int | None:
-    steps = {a.shape[0] for a, nd in arrays_and_ndims if a is not None and a.ndim == nd + 1}
-    if len(steps) > 1:
-        raise InputError(f"per-step model arrays disagree on the number of steps: {sorted(steps)}.")
-    return steps.pop() if steps else None
+def _num_steps_of(**arrays_and_ndims) -> int | None:
+    """The common leading length of the per-step arrays (``name=(array, matrix_ndim)``)."""
+    steps = {
+        name: a.shape[0]
+        for name, (a, nd) in arrays_and_ndims.items()
+        if a is not None and a.ndim == nd + 1
+    }
+    if len(set(steps.values())) > 1:
+        listing = ", ".join(f"`{name}` has {t}" for name, t in steps.items())
+        raise InputError(f"per-step model arrays disagree on the number of steps: {listing}.")
+    return next(iter(steps.values()), None)
 
 
 class AbstractStateSpaceModel(eqx.Module):
@@ -212,17 +218,17 @@ class LinearGaussianModel(AbstractStateSpaceModel):
         self.initial_cov = P0
         self.b = b
         self.angle_components = tuple(int(i) for i in angle_components)
-        _num_steps_of((F, 2), (Q, 2), (H, 2), (R, 2), (b, 1))
+        _num_steps_of(
+            transition_matrix=(F, 2),
+            process_noise_cov=(Q, 2),
+            measurement_matrix=(H, 2),
+            measurement_noise_cov=(R, 2),
+            transition_offset=(b, 1),
+        )
 
     @property
     def num_steps(self) -> int | None:
-        return _num_steps_of(
-            (self.F, 2),
-            (self.Q, 2),
-            (self.H, 2),
-            (self.R, 2),
-            (self.b, 1),
-        )
+        return _num_steps_of(F=(self.F, 2), Q=(self.Q, 2), H=(self.H, 2), R=(self.R, 2), b=(self.b, 1))
 
     @property
     def meas_dim(self) -> int:
@@ -338,11 +344,11 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
         self.transition_jacobian_fn = transition_jacobian_fn
         self.measurement_jacobian_fn = measurement_jacobian_fn
         self.angle_components = tuple(int(i) for i in angle_components)
-        _num_steps_of((Q, 2), (R, 2))
+        _num_steps_of(process_noise_cov=(Q, 2), measurement_noise_cov=(R, 2))
 
     @property
     def num_steps(self) -> int | None:
-        return _num_steps_of((self.Q, 2), (self.R, 2))
+        return _num_steps_of(Q=(self.Q, 2), R=(self.R, 2))
 
     def transition(self, x, k):
         return self.transition_fn(x, k)
