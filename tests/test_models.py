@@ -176,7 +176,6 @@ def test_singer_tends_to_constant_acceleration_for_long_time_constant():
 # Jitted once at module level so every (3, 3) case below shares one compilation.
 _VL = jax.jit(van_loan)
 _VL_JACFWD = jax.jit(jax.jacfwd(van_loan, argnums=2))
-_VL_JACREV = jax.jit(jax.jacrev(van_loan, argnums=2))
 
 
 def _random_stable(seed, n=3):
@@ -197,17 +196,16 @@ def _random_stable(seed, n=3):
     ids=["singer-short", "singer-long", "random-stable"],
 )
 def test_van_loan_tau_derivative_matches_finite_differences(A, Qc, tau):
-    """jacfwd and jacrev of Φ(τ), Q_d(τ) match central differences (h = 1e-6 τ) to rtol 1e-6."""
-    (dphi, dq), (rphi, rq) = _VL_JACFWD(A, Qc, tau), _VL_JACREV(A, Qc, tau)
+    """jacfwd of Φ(τ), Q_d(τ) matches central differences (h = 1e-6 τ) to rtol 1e-6."""
+    dphi, dq = _VL_JACFWD(A, Qc, tau)
     h = 1e-6 * tau
     (pp, qp), (pm, qm) = _VL(A, Qc, tau + h), _VL(A, Qc, tau - h)
     fd_phi = (np.asarray(pp) - np.asarray(pm)) / (2 * h)
     fd_q = (np.asarray(qp) - np.asarray(qm)) / (2 * h)
-    for ad, rev, fd in ((dphi, rphi, fd_phi), (dq, rq, fd_q)):
+    for ad, fd in ((dphi, fd_phi), (dq, fd_q)):
         scale = np.max(np.abs(fd))
         assert scale > 0
         assert_allclose(ad, fd, rtol=1e-6, atol=1e-9 * scale)
-        assert_allclose(rev, ad, rtol=1e-12, atol=1e-14 * scale)
     # Analytic check: dΦ/dτ = A Φ.
     assert_allclose(dphi, A @ np.asarray(_VL(A, Qc, tau)[0]), rtol=1e-10, atol=1e-13)
 

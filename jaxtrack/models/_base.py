@@ -67,6 +67,25 @@ def _num_steps_of(**arrays_and_ndims) -> int | None:
     return next(iter(steps.values()), None)
 
 
+def _check_noise_and_prior(Q, R, m0, P0, angle_components) -> None:
+    """Shape and value checks shared by every model: prior, plant noise, measurement noise."""
+    check_shape("initial_mean", m0, [(None,)])
+    n = m0.shape[0]
+    check_shape("initial_cov", P0, [(n, n)])
+    check_shape("process_noise_cov", Q, [(n, n), (None, n, n)])
+    check_shape("measurement_noise_cov", R, [(None, None), (None, None, None)])
+    m = R.shape[-1]
+    if R.shape[-2] != m:
+        raise InputError(f"`measurement_noise_cov` must be square; got shape {R.shape}.")
+    for idx in angle_components:
+        if not 0 <= idx < m:
+            raise InputError(f"`angle_components` entry {idx} is not a measurement index (m = {m}).")
+    check_finite("initial_mean", m0)
+    check_covariance("initial_cov", P0)
+    check_covariance("process_noise_cov", Q, definite=False)
+    check_covariance("measurement_noise_cov", R)
+
+
 class AbstractStateSpaceModel(eqx.Module):
     """Base class of every state-space model: a Gaussian prior, dynamics and a measurement model.
 
@@ -185,29 +204,16 @@ class LinearGaussianModel(AbstractStateSpaceModel):
         dtype = jnp.result_type(F, Q, H, R, m0, P0, float)
         F, Q, H, R, m0, P0 = (a.astype(dtype) for a in (F, Q, H, R, m0, P0))
 
-        check_shape("initial_mean", m0, [(None,)])
-        n = m0.shape[0]
-        check_shape("initial_cov", P0, [(n, n)])
+        _check_noise_and_prior(Q, R, m0, P0, angle_components)
+        n, m = m0.shape[0], R.shape[-1]
         check_shape("transition_matrix", F, [(n, n), (None, n, n)])
-        check_shape("process_noise_cov", Q, [(n, n), (None, n, n)])
-        check_shape("measurement_matrix", H, [(None, n), (None, None, n)])
-        m = H.shape[-2]
-        check_shape("measurement_noise_cov", R, [(m, m), (None, m, m)])
+        check_shape("measurement_matrix", H, [(m, n), (None, m, n)])
+        check_finite("transition_matrix", F)
+        check_finite("measurement_matrix", H)
         b = None
         if transition_offset is not None:
             b = jnp.asarray(transition_offset).astype(dtype)
             check_shape("transition_offset", b, [(n,), (None, n)])
-        for idx in angle_components:
-            if not 0 <= idx < m:
-                raise InputError(f"`angle_components` entry {idx} is not a measurement index (m = {m}).")
-
-        check_finite("initial_mean", m0)
-        check_covariance("initial_cov", P0)
-        check_finite("transition_matrix", F)
-        check_covariance("process_noise_cov", Q, definite=False)
-        check_finite("measurement_matrix", H)
-        check_covariance("measurement_noise_cov", R)
-        if b is not None:
             check_finite("transition_offset", b)
 
         self.F = F
@@ -320,21 +326,7 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
         for name, fn in (("transition_fn", transition_fn), ("measurement_fn", measurement_fn)):
             if not callable(fn):
                 raise InputError(f"`{name}` must be a callable f(x, k); got {type(fn).__name__}.")
-        check_shape("initial_mean", m0, [(None,)])
-        n = m0.shape[0]
-        check_shape("initial_cov", P0, [(n, n)])
-        check_shape("process_noise_cov", Q, [(n, n), (None, n, n)])
-        check_shape("measurement_noise_cov", R, [(None, None), (None, None, None)])
-        if R.shape[-1] != R.shape[-2]:
-            raise InputError(f"`measurement_noise_cov` must be square; got shape {R.shape}.")
-        check_finite("initial_mean", m0)
-        check_covariance("initial_cov", P0)
-        check_covariance("process_noise_cov", Q, definite=False)
-        check_covariance("measurement_noise_cov", R)
-        m = R.shape[-1]
-        for idx in angle_components:
-            if not 0 <= idx < m:
-                raise InputError(f"`angle_components` entry {idx} is not a measurement index (m = {m}).")
+        _check_noise_and_prior(Q, R, m0, P0, angle_components)
         self.transition_fn = transition_fn
         self.measurement_fn = measurement_fn
         self.Q = Q
