@@ -11,6 +11,8 @@ _enable_x64_by_default()
 from . import filters as filters  # noqa: E402
 from . import models as models  # noqa: E402
 from . import montecarlo as montecarlo  # noqa: E402
+from . import covariance as covariance  # noqa: E402
+from . import sensitivity as sensitivity  # noqa: E402
 from ._validation import InputError as InputError  # noqa: E402
 
 __version__ = "0.1.0"

@@ -39,6 +39,7 @@ class Conditioned(NamedTuple):
     innovation: Float[Array, " m"]  # z − ẑ, 0 in missing components
     innovation_cov: Float[Array, "m m"]  # S; identity rows/columns in missing components
     log_likelihood: Float[Array, ""]  # log N(innovation; 0, S) over the observed components
+    gain: Float[Array, "n m"]  # W used; zero columns in missing components
 
 
 def masked_noise(R: Array, observed: Bool[Array, " m"]) -> Array:
@@ -98,7 +99,7 @@ def condition_linearized(
     new_cov = symmetrize(new_cov)
     new_mean = mean + gain @ innovation
     ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f))
-    return Conditioned(new_mean, new_cov, innovation, S, ll)
+    return Conditioned(new_mean, new_cov, innovation, S, ll, gain)
 
 
 def condition_on_moments(
@@ -125,7 +126,7 @@ def condition_on_moments(
     new_cov = symmetrize(cov - gain @ S @ gain.T)  # symmetric in exact arithmetic; see above
     new_mean = mean + gain @ innovation
     ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f))
-    return Conditioned(new_mean, new_cov, innovation, S, ll)
+    return Conditioned(new_mean, new_cov, innovation, S, ll, gain)
 
 
 class AbstractFilter(eqx.Module):

@@ -1,0 +1,15 @@
+"""Ho's (1968) covariance-sensitivity analysis: analytic recursions and their autodiff counterparts.
+
+- ``_variations``: exact (all-order) one-stage variation equations, eqs. (17)–(30), App. B.
+- ``_recursions``: first-order analysis: local variations (31), error-transition matrices
+  (34)–(35), multistage variations (36)–(37), adjoint matrices (42)–(43), scalar-parameter
+  sensitivity (46)–(48), time-fixed correction (50), sensitivity indices (51)–(54); every
+  analytic function has an autodiff counterpart with the same inputs and outputs.
+- ``_gain``: second-order gain variation about the optimum, eqs. (55)–(64).
+- ``_one_stage``: Sec. IV one-stage closed forms (99)–(134) and the App. C normalisation.
+"""
+
+from ._gain import *  # noqa: F401,F403
+from ._one_stage import *  # noqa: F401,F403
+from ._recursions import *  # noqa: F401,F403
+from ._variations import *  # noqa: F401,F403
