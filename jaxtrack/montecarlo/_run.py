@@ -39,6 +39,7 @@ from ._simulate import (
 class _Sums(NamedTuple):
     """Per-step sums over the runs seen so far (all float64 under the default precision)."""
 
+    error: Array  # (T, n): Σ (x − x̂)
     squared_error: Array  # (T, n): Σ (x − x̂)²
     nees: Array  # (T,): Σ NEES
     nees_sq: Array  # (T,): Σ NEES², for the empirical spread
@@ -53,6 +54,7 @@ class MonteCarloResult(eqx.Module):
     **Fields:**
 
     - ``mse`` ``(T, n)``: mean squared error of each state component at each step.
+    - ``mean_error`` ``(T, n)``: mean of ``x − x̂`` (the bias; 0 for a linear filter).
     - ``nees`` ``(T,)``: NEES averaged over runs; ``nees_bounds`` ``(T, 2)`` its two-sided bounds.
     - ``nees_std`` ``(T,)``: the empirical standard deviation of NEES over runs.
     - ``nis`` ``(T,)``: NIS averaged over runs; ``nis_dof`` ``(T,)`` its degrees of freedom (the
@@ -67,6 +69,7 @@ class MonteCarloResult(eqx.Module):
     """
 
     mse: Float[Array, "T n"]
+    mean_error: Float[Array, "T n"]
     nees: Float[Array, " T"]
     nees_std: Float[Array, " T"]
     nees_bounds: Float[Array, "T 2"]
@@ -117,7 +120,7 @@ def _run_once(filter, filter_model, truth, factors, observed, first_step, key):
         error = x - post.mean
         nees = normalized_squared_error(error, post.cov)
         nis = normalized_squared_error(post.innovation, post.innovation_cov)
-        return (filt, x), (error**2, nees, nis)
+        return (filt, x), (error, nees, nis)
 
     (filt, _), per_step = jax.lax.scan(step, carry0, (jnp.arange(observed.shape[0]), observed))
     ok = filt.ok & jnp.all(jnp.isfinite(per_step[1])) & jnp.all(jnp.isfinite(per_step[2]))
@@ -130,11 +133,11 @@ def _chunk_sums(sums, start, key, filter, filter_model, truth, observed, first_s
     run_index = start + jnp.arange(chunk_size)
     valid = run_index < num_runs
     keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(run_index)
-    (sq_err, nees, nis), ok = jax.vmap(
+    (err, nees, nis), ok = jax.vmap(
         lambda k: _run_once(filter, filter_model, truth, factors, observed, first_step, k)
     )(keys)
     use = valid & ok
-    w = use.astype(sq_err.dtype)
+    w = use.astype(err.dtype)
 
     def wsum(a):
         # Zero, not multiply: a failed run may hold NaN, and NaN·0 is NaN.
@@ -142,7 +145,8 @@ def _chunk_sums(sums, start, key, filter, filter_model, truth, observed, first_s
         return jnp.sum(a, axis=0)
 
     return _Sums(
-        sums.squared_error + wsum(sq_err),
+        sums.error + wsum(err),
+        sums.squared_error + wsum(err**2),
         sums.nees + wsum(nees),
         sums.nees_sq + wsum(nees**2),
         sums.nis + wsum(nis),
@@ -229,6 +233,7 @@ def monte_carlo(
     dtype = filter_model.initial_cov.dtype
     sums = _Sums(
         jnp.zeros((num_steps, n), dtype),
+        jnp.zeros((num_steps, n), dtype),
         jnp.zeros((num_steps,), dtype),
         jnp.zeros((num_steps,), dtype),
         jnp.zeros((num_steps,), dtype),
@@ -267,6 +272,7 @@ def _summarize(sums: _Sums, observed, n, confidence) -> MonteCarloResult:
     nees_b = chi2_mean_bounds(np.full(mean_nees.shape, n), num_ok, confidence)
     return MonteCarloResult(
         mse=sums.squared_error / num_ok,
+        mean_error=sums.error / num_ok,
         nees=mean_nees,
         nees_std=jnp.sqrt(nees_var * num_ok / max(num_ok - 1, 1)),
         nees_bounds=jnp.asarray(nees_b),
