@@ -1,5 +1,6 @@
 # Two commands a new user needs (see README.md):
-#   make run    — set up .venv from pyproject.toml and run the main job (results/ holds tables + PNGs)
+#   make run    — set up .venv from pyproject.toml and reproduce every study (tables; PNGs in results/)
+#   make demo   — the 10,000-run Monte Carlo demo (results/demo)
 #   make test   — set up .venv from pyproject.toml and run the test suite
 # Everything is installed from the project's own files into ./.venv; nothing by hand.
 
@@ -9,7 +10,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PYTEST_ARGS ?=
 
-.PHONY: install run test test-slow clean
+.PHONY: install run demo test test-slow clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,6 +21,9 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 run: $(STAMP)
+	$(BIN)/jaxtrack reproduce all --out results
+
+demo: $(STAMP)
 	$(BIN)/jaxtrack demo --out results/demo
 
 test: $(STAMP)

@@ -1,5 +1,6 @@
 """The ``jaxtrack`` command line.
 
+``jaxtrack reproduce STUDY|all`` — reproduce the studies' printed numbers (table or JSON) and figures.
 ``jaxtrack demo`` — Monte Carlo of a 2-D constant-velocity tracker (table + PNG).
 """
 
@@ -13,6 +14,9 @@ import sys
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="jaxtrack", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
+    from . import _reproduce
+
+    _reproduce.add_parser(sub)
     demo = sub.add_parser("demo", help="Monte Carlo of a 2-D constant-velocity tracker: RMSE/ANEES table and PNG")
     demo.add_argument("--runs", type=int, default=10_000, help="Monte Carlo runs (default 10000)")
     demo.add_argument("--steps", type=int, default=100, help="steps per run (default 100, τ = 1 s)")
@@ -26,6 +30,10 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if args.command == "reproduce":
+        from . import _reproduce
+
+        return _reproduce.main(args)
     if args.command == "demo":
         from ._demo import format_table, run_demo
 

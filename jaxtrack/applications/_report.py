@@ -1,0 +1,52 @@
+"""Rows of a reproduction table: one printed paper number against jaxtrack's value."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+
+@dataclasses.dataclass(frozen=True)
+class PaperRow:
+    """One reproduced number.
+
+    - ``id``: the verification-target id of the study's spec (e.g. ``"T16"``); several rows may
+      share one id when a target has several numbers.
+    - ``quantity``: what is compared, with units.
+    - ``paper``: the value printed in the paper (after the spec's documented OCR corrections).
+    - ``value``: jaxtrack's value.
+    - ``rtol``: the relative tolerance: the spec's tolerance, or half a unit in the paper's last
+      printed digit when that is coarser (a 2-digit percentage cannot agree to 5e-3).
+    """
+
+    id: str
+    quantity: str
+    paper: float
+    value: float
+    rtol: float
+
+    @property
+    def ok(self) -> bool:
+        return bool(math.isfinite(self.value) and abs(self.value - self.paper) <= self.rtol * abs(self.paper))
+
+    def as_dict(self) -> dict:
+        return {"id": self.id, "quantity": self.quantity, "paper": self.paper, "value": self.value,
+                "rtol": self.rtol, "ok": self.ok}
+
+
+def printed_rtol(paper: float, last_digit: float, floor: float = 5e-3) -> float:
+    """Tolerance for a number printed to ``last_digit`` (e.g. 0.01): ``max(floor, ½·last_digit/|paper|)``."""
+    return max(floor, 0.5 * last_digit / abs(paper))
+
+
+def format_rows(rows: list[PaperRow], title: str) -> str:
+    head = f"{'id':<5} {'quantity':<58} {'paper':>11} {'jaxtrack':>12} {'rtol':>7}  ok"
+    lines = [title, head, "-" * len(head)]
+    for r in rows:
+        lines.append(
+            f"{r.id:<5} {r.quantity[:58]:<58} {r.paper:>11.6g} {r.value:>12.6g} {r.rtol:>7.1e}  "
+            f"{'yes' if r.ok else 'NO'}"
+        )
+    passed = sum(r.ok for r in rows)
+    lines.append(f"{passed}/{len(rows)} reproduced within tolerance")
+    return "\n".join(lines)

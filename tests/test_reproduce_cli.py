@@ -1,0 +1,30 @@
+"""`jaxtrack reproduce`: table rows, JSON keys, figures, and the pass count of `all`."""
+
+import json
+
+from jaxtrack.cli import main
+
+KEYS = {"id", "quantity", "paper", "value", "rtol", "ok"}
+
+
+def test_reproduce_ho_json(tmp_path, capsys):
+    code = main(["reproduce", "ho", "--json", "--out", str(tmp_path)])
+    rows = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert rows and all(set(r) == KEYS for r in rows)
+    assert all(r["ok"] for r in rows), [r for r in rows if not r["ok"]]
+    ids = {r["id"] for r in rows}
+    assert {"T16", "T17", "T18", "T19", "T20", "T21", "T22", "T23", "T24"} <= ids
+    t16 = next(r for r in rows if r["id"] == "T16")
+    assert abs(t16["value"] - 876.2576) < 1e-3 and t16["paper"] == 876
+    pngs = sorted(p.name for p in (tmp_path / "ho").glob("*.png"))
+    assert "fig07_covariance_1g.png" in pngs
+
+
+def test_reproduce_all_ends_with_pass_count(tmp_path, capsys):
+    code = main(["reproduce", "all", "--out", str(tmp_path)])
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert code == 0
+    assert last.startswith(tuple("0123456789")) and "paper numbers reproduced" in last
+    passed, total = last.split()[0].split("/")
+    assert passed == total and int(total) >= 16
