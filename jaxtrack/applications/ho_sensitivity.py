@@ -18,14 +18,27 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..covariance import CovarianceHistory, covariance_recursion
-from ._report import PaperRow, printed_rtol
 from ..models import LinearGaussianModel, ho_plant, sample_times, segment_schedule
+from ..sensitivity import (
+    Analytic,
+    SegmentSensitivity,
+    adjoint,
+    dimensionless_period_sensitivity,
+    normalize,
+    one_stage_update,
+    segment_sensitivity,
+    updated_position_variance,
+)
+from ._report import PaperRow, printed_rtol
 
 UNIFORM = (10, 10, 10, 10, 10)  # Fig. 7 curve a
 COARSE = (8, 8, 8, 8, 8)  # Fig. 7 curve b
 HO_RULE_1G = (10, 5, 5, 10, 10)  # Fig. 7 curve c: 10 points removed from segments 2 and 3
 HO_RULE_10G = (5, 5, 10, 10, 10)  # Fig. 10 curve c
 SMOOTHED_R_COEFF = 1e3  # Example 2: R = 10³/τ ft² (eq. 87)
+POSITION = np.diag([1.0, 0.0])  # L_T/T: J = P_T(1,1), the terminal position variance
+# Sec. IV Ex. 1 input (eq. 136): the paper's P*(t = 1 s) of the 1-g (10,…) filter, in ft units
+SEC4_P = np.array([[3422.0, 5380.0], [5380.0, 11973.0]])
 
 
 def scenario(counts: Sequence[int], g: float = 1.0, *, smoothed: bool = False) -> tuple[LinearGaussianModel, jnp.ndarray]:
@@ -62,6 +75,98 @@ def integer_second_curve(counts: Sequence[int], g: float = 1.0, *, smoothed: boo
     return np.array([covariance_at(counts, g, float(t), smoothed=smoothed)[0, 0] for t in range(1, 6)])
 
 
+def segment_model_fn(counts: Sequence[int], g: float = 1.0, *, smoothed: bool = False):
+    """``segment_taus -> model`` for a scheme: one τ_i per segment, repeated over its samples."""
+    counts = tuple(int(c) for c in counts)
+
+    def model_fn(segment_taus):
+        taus = jnp.repeat(segment_taus, jnp.asarray(counts), total_repeat_length=sum(counts))
+        r = SMOOTHED_R_COEFF / taus if smoothed else 1e4
+        return ho_plant(taus, g=g, measurement_var=r)
+
+    return model_fn
+
+
+def segment_sensitivities(
+    counts: Sequence[int] = UNIFORM, g: float = 1.0, *, smoothed: bool = False, method=Analytic()
+) -> SegmentSensitivity:
+    """Ho's ``s(τ_i)`` (Figs. 8, 11, 13) for a scheme: time-fixed (Convention 3) and sample-fixed.
+
+    Units: ft² of terminal position variance per second of segment period. In the smoothed case
+    the first sample's ``R(τ_1)`` counts toward ``s_1`` (its true derivative); the spec's
+    reference omits that term (415.4 there, 324.3 here for 1 g); segments 2–5 are unaffected.
+    """
+    counts = tuple(counts)
+    taus = 1.0 / jnp.asarray(counts, dtype=float)
+    return segment_sensitivity(segment_model_fn(counts, g, smoothed=smoothed), taus, counts, POSITION, method=method)
+
+
+def adjoint_history(counts: Sequence[int] = UNIFORM, g: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """``(L_{k/k}, times)``: adjoint matrices (eq. (43)) for ``J = P_T(1,1)`` and sample times (Figs. 9, 12)."""
+    model, taus = scenario(counts, g)
+    return np.asarray(adjoint(model, POSITION).filtered), np.asarray(sample_times(taus))
+
+
+def velocity_measurement_estimate(t: float, g: float, velocity_var: float = 100.0) -> dict:
+    """Sec. III-E: value of one extra velocity measurement at time ``t`` (R_v = 100 (ft/s)²).
+
+    Returns the paper's estimate ``L22(t)·(P22(t) − R_v)`` and the ACTUAL terminal reduction with
+    the velocity measurement processed after the position update at ``t`` and all later gains
+    re-optimised (ft²).
+    """
+    model, taus = scenario(UNIFORM, g)
+    times = np.asarray(sample_times(taus))
+    (k,) = np.flatnonzero(np.abs(times - t) < 1e-9)
+    hist = covariance_recursion(model)
+    L, _ = adjoint_history(UNIFORM, g)
+    P = np.asarray(hist.filtered_cov[k])
+    estimate = L[k, 1, 1] * (P[1, 1] - velocity_var)
+    # Velocity update at k, then continue with the remaining samples.
+    H = np.array([[0.0, 1.0]])
+    S = H @ P @ H.T + velocity_var
+    P_v = P - P @ H.T @ np.linalg.solve(S, H @ P)
+    F, Q = np.asarray(model.F[k + 1]), np.asarray(model.Q[k + 1])
+    rest = ho_plant(taus[k + 1:], g=g, initial_cov=jnp.asarray(F @ P_v @ F.T + Q))
+    J_new = float(covariance_recursion(rest).filtered_cov[-1, 0, 0])
+    J0 = float(hist.filtered_cov[-1, 0, 0])
+    return {"L22": float(L[k, 1, 1]), "P22": float(P[1, 1]), "estimate": float(estimate),
+            "actual_reduction": J0 - J_new, "terminal": J0}
+
+
+def sec4_example1(tau_star: float = 0.1) -> dict:
+    """Sec. IV-B Example 1 (eqs. (136)–(139)): normalise P*(1 s), take one stage with τ*.
+
+    Returns ρ, the τ scale, r_x, α (q_x = ατ), a = 2ρ + α, the normalised ``(p_x)_{k/k}`` by
+    eq. (129), and ``(p_x*)_{k/k}`` in ft² from the full 2×2 one-stage map (99).
+    """
+    q_star = np.diag([0.259 * tau_star, 104.0 * tau_star])
+    n = normalize(SEC4_P, tau_star, q_star, 1e4)
+    rho = float(n.P[0, 1])
+    scale = float(n.scale[1] / n.scale[0])
+    alpha = 0.259 / (SEC4_P[0, 0] * scale)
+    a = 2 * rho + alpha
+    tau = float(n.tau)
+    p_x = float(updated_position_variance(a, tau, n.r_x))
+    full = one_stage_update(n.P[0, 1], n.tau, n.Q[0, 0], n.Q[1, 1], n.r_x)
+    return {"rho": rho, "tau_scale": scale, "r_x": float(n.r_x), "alpha": alpha, "a": a, "tau": tau,
+            "p_x": p_x, "p_x_ft2": float(full.p_x) * SEC4_P[0, 0]}
+
+
+def sec4_example3() -> dict:
+    """Sec. IV-B Example 3: keep ``(p_x)_{k/k} = 0.75`` while τ goes 1 → 2 (eqs. (128)–(129)).
+
+    Returns the operating point, the ``a`` needed with ``r_x = 1`` and the ``r_x`` needed with
+    ``a = 1`` (closed-form inverses of (129): ``1/p = 1/r_x + 1/(1 + aτ + τ²)``).
+    """
+    p = float(updated_position_variance(1.0, 1.0, 1.0))
+    m_needed = 1.0 / (1.0 / p - 1.0)  # with r_x = 1
+    tau = 2.0
+    a_needed = (m_needed - 1.0 - tau**2) / tau
+    m = 1.0 + tau + tau**2  # a = 1
+    r_needed = 1.0 / (1.0 / p - 1.0 / m)
+    return {"p_x": p, "a_needed": a_needed, "r_x_needed": r_needed}
+
+
 # --------------------------------------------------------------------------------------------
 # Figures (Sec. III-E). Each returns a matplotlib Figure built from the functions above.
 
@@ -92,6 +197,63 @@ def figure_covariance_curves(g: float = 1.0):
         ax.axvline(edge, color="0.85", lw=0.8, zorder=0)
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(fontsize=8)
+    return fig
+
+
+def figure_segment_sensitivity(g: float = 1.0, *, smoothed: bool = False):
+    """Figs. 8 (1 g), 11 (10 g), 13 (smoothed data): ``s(τ_i)`` per segment, time- and sample-fixed."""
+    import matplotlib.pyplot as plt
+
+    s = segment_sensitivities(UNIFORM, g, smoothed=smoothed)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), constrained_layout=True)
+    idx = np.arange(1, 6)
+    ax.bar(idx - 0.18, s.time_fixed, width=0.36, label="time-fixed s(τ_i) (Ho's, Convention 3)")
+    ax.bar(idx + 0.18, s.sample_fixed, width=0.36, label="sample-fixed ∂J/∂τ_i (eq. 52)")
+    for i, v in zip(idx, s.time_fixed):
+        ax.annotate(f"{v:.1f}", (i - 0.18, v), ha="center", va="bottom" if v >= 0 else "top", fontsize=7)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_yscale("symlog", linthresh=10.0)
+    ax.set_xlabel("segment i (1-s segments, 10 samples each)")
+    ax.set_ylabel("∂P_T(1,1)/∂τ_i [ft²/s]")
+    number = {(1.0, False): 8, (10.0, False): 11}.get((g, smoothed), 13)
+    ax.set_title(f"Ho 1968 Fig. {number}: segment sensitivity, {g:g} g" + (", R = 10³/τ" if smoothed else ""))
+    ax.legend(fontsize=8)
+    return fig
+
+
+def figure_adjoint(g: float = 1.0):
+    """Fig. 9 (1 g) / Fig. 12 (10 g): diagonals of the adjoint ``L_{k/k}`` for ``J = P_T(1,1)``."""
+    import matplotlib.pyplot as plt
+
+    L, t = adjoint_history(UNIFORM, g)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), constrained_layout=True)
+    ax.plot(t, L[:, 0, 0], label="a: L11 (position)")
+    ax.plot(t, L[:, 1, 1], label="b: L22 (velocity)")
+    k = int(np.argmax(L[:, 1, 1]))
+    ax.annotate(f"max L22 = {L[k, 1, 1]:.3f} at {t[k]:.1f} s", (t[k], L[k, 1, 1]), xytext=(0.5, 0.8),
+                textcoords="axes fraction", arrowprops={"arrowstyle": "->", "lw": 0.6}, fontsize=8)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("adjoint ∂P_T(1,1)/∂P_k/k (diagonal)")
+    ax.set_title(f"Ho 1968 Fig. {9 if g == 1.0 else 12}: adjoint matrices, {g:g} g")
+    ax.grid(True, alpha=0.25)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def figure_one_stage_sensitivity():
+    """Figs. 16–17: one-stage dimensionless sensitivity (Δp_x/p_x)/(Δτ/τ), eq. (134), a = 0 and 1."""
+    import matplotlib.pyplot as plt
+
+    tau = np.linspace(0.01, 3.0, 300)
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.6), sharey=True, constrained_layout=True)
+    for ax, a, number in zip(axes, (0.0, 1.0), (16, 17)):
+        for r in (0.1, 0.5, 1.0, 2.0, 5.0):
+            ax.plot(tau, dimensionless_period_sensitivity(a, tau, r), label=f"r_x = {r:g}")
+        ax.set_title(f"Fig. {number}: a = {a:g}")
+        ax.set_xlabel("normalised sampling period τ")
+        ax.grid(True, alpha=0.25)
+    axes[0].set_ylabel("(Δp_x/p_x) / (Δτ/τ)")
+    axes[1].legend(fontsize=8)
     return fig
 
 
@@ -141,6 +303,47 @@ def paper_rows() -> list[PaperRow]:
                  100 * (values["T21"] / values["T19"] - 1), (100 * 5 / 2249) / 15.5))
     add(PaperRow("T29", "1 g (10,5,5,10,10) increase over (10,…) [ft²]", 18,
                  values["T18"] - values["T16"], 1.0 / 18))
+
+    # Sec. III-E segment sensitivities (Convention 3) and adjoints
+    s1 = segment_sensitivities(UNIFORM, 1.0)
+    add(PaperRow("T25", "s(τ_2), 1 g, time-fixed [ft²/s] (Fig. 8)", 227, float(s1.time_fixed[1]), 5e-3))
+    add(PaperRow("T25", "s(τ_3), 1 g, time-fixed [ft²/s] (Fig. 8)", 331, float(s1.time_fixed[2]), 5e-3))
+    add(PaperRow("T25", "predicted ΔP_T for (10,5,5,10,10): 0.1(s_2+s_3) [ft²]", 55.8,
+                 0.1 * float(s1.time_fixed[1] + s1.time_fixed[2]), 5e-3))
+    order = np.argsort(s1.time_fixed) + 1
+    add(PaperRow("T25", "least-sensitive segment (1 g)", 2, float(order[0]), 0.0))
+    add(PaperRow("T25", "next least-sensitive segment (1 g)", 3, float(order[1]), 0.0))
+    L1, t1 = adjoint_history(UNIFORM, 1.0)
+    k_max = int(np.argmax(L1[:, 1, 1]))
+    add(PaperRow("T28", "max of L22 (1 g), Fig. 9 curve b", 0.4, float(L1[k_max, 1, 1]), 0.05))
+    add(PaperRow("T28", "time of the L22 maximum (1 g) [s]", 3.5, float(t1[k_max]), 0.05))
+    v1 = velocity_measurement_estimate(3.5, 1.0)
+    v10 = velocity_measurement_estimate(4.3, 10.0)
+    add(PaperRow("T28", "L22 at 4.3 s (10 g), Fig. 12", 0.05, v10["L22"], 0.05))
+    add(PaperRow("T29", "velocity-measurement gain 0.4×313, 1 g [ft²]", 125, v1["estimate"], 0.05))
+    add(PaperRow("T29", "velocity-measurement gain 0.05×8140, 10 g [ft²]", 407, v10["estimate"], 0.05))
+
+    # Sec. IV one-stage examples (formula values; spec §5.4)
+    ex1 = sec4_example1(0.1)
+    for key, quantity, paper, digit in (
+        ("rho", "ρ = 5380/6400 (eq. 137)", 0.840, 0.001),
+        ("tau_scale", "τ/τ* = sqrt(p_v*/p_x*) (eq. 137)", 1.87, 0.01),
+        ("r_x", "r_x = 10⁴/3422 (eq. 138)", 2.92, 0.01),
+        ("alpha", "α in q_x = ατ (eq. 138)", 4.05e-5, 1e-7),
+        ("a", "a = 2ρ + α (eq. 131)", 1.68, 0.01),
+        ("p_x", "(p_x)_k/k at τ* = 0.1 s (eq. 139)", 0.92, 0.01),
+    ):
+        add(PaperRow("T30", quantity, paper, ex1[key], printed_rtol(paper, digit)))
+    add(PaperRow("T15", "(p_x*)_k/k at τ* = 0.1 s, 3422 → [ft²]", 3150, ex1["p_x_ft2"], 5e-3))
+    # Ex. 2 (eq. 140): smoothed data, r_x ∝ 1/τ through the Ex. 1 point: r_x = 2.92·0.187/τ
+    tau2 = 0.2 * ex1["tau_scale"]
+    r_smoothed = ex1["r_x"] * ex1["tau"] / tau2
+    p_smoothed = float(updated_position_variance(ex1["a"], tau2, r_smoothed))
+    add(PaperRow("T31", "(p_x)_k/k at τ* = 0.2 s, smoothed r_x = 0.187·2.92/τ", 0.8, p_smoothed, printed_rtol(0.8, 0.1)))
+    ex3 = sec4_example3()
+    add(PaperRow("T32", "(p_x)_k/k at τ = 1, a = 1, r_x = 1", 0.75, ex3["p_x"], 1e-9))
+    add(PaperRow("T32", "a needed at τ = 2 to keep 0.75", -1.0, ex3["a_needed"], 1e-9))
+    add(PaperRow("T32", "r_x needed at τ = 2 to keep 0.75 ('about 0.8')", 0.8, ex3["r_x_needed"], printed_rtol(0.8, 0.1)))
     return rows
 
 
@@ -154,10 +357,18 @@ def reproduce(out_dir) -> tuple[list[PaperRow], list[str]]:
     out.mkdir(parents=True, exist_ok=True)
     rows = paper_rows()
     figures = []
-    for name, fig in (
-        ("fig07_covariance_1g.png", figure_covariance_curves(1.0)),
-        ("fig10_covariance_10g.png", figure_covariance_curves(10.0)),
+    for name, make in (
+        ("fig07_covariance_1g.png", lambda: figure_covariance_curves(1.0)),
+        ("fig08_segment_sensitivity_1g.png", lambda: figure_segment_sensitivity(1.0)),
+        ("fig09_adjoint_1g.png", lambda: figure_adjoint(1.0)),
+        ("fig10_covariance_10g.png", lambda: figure_covariance_curves(10.0)),
+        ("fig11_segment_sensitivity_10g.png", lambda: figure_segment_sensitivity(10.0)),
+        ("fig12_adjoint_10g.png", lambda: figure_adjoint(10.0)),
+        ("fig13_segment_sensitivity_smoothed_1g.png", lambda: figure_segment_sensitivity(1.0, smoothed=True)),
+        ("fig13_segment_sensitivity_smoothed_10g.png", lambda: figure_segment_sensitivity(10.0, smoothed=True)),
+        ("fig16_17_one_stage_sensitivity.png", figure_one_stage_sensitivity),
     ):
+        fig = make()
         fig.savefig(out / name, dpi=120)
         plt.close(fig)
         figures.append(str(out / name))
