@@ -25,3 +25,21 @@ def test_demo_writes_table_and_figure(tmp_path, capsys):
 def test_entry_point_help():
     proc = subprocess.run([sys.executable, "-m", "jaxtrack.cli", "--help"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "demo" in proc.stdout
+
+
+def test_design_cli_prints_schedules_and_writes_figure(tmp_path, capsys):
+    import json as _json
+
+    from jaxtrack.cli import main as _main
+
+    assert _main(["design", "uniform", "--samples", "50", "--out", str(tmp_path), "--json"]) == 0
+    rows = _json.loads(capsys.readouterr().out)
+    newton = next(r for r in rows if r["design"].startswith("Newton"))
+    assert abs(newton["schedule"][0] - 0.13715278) < 1e-7 and abs(newton["J"] - 1000.0) < 1e-5
+    assert _main(["design", "gradient", "--out", str(tmp_path), "--json"]) == 0
+    rows = {r["design"]: r for r in _json.loads(capsys.readouterr().out)}
+    assert rows["Ho's rule"]["schedule"] == [10, 5, 5, 10, 10]
+    assert rows["gradient, rounded + local search"]["schedule"] == [8, 1, 1, 10, 20]
+    assert rows["per-step τ_k (optax)"]["J"] < rows["uniform"]["J"] / 3
+    assert {"design_uniform.png", "design_gradient.png"} <= {p.name for p in tmp_path.glob("*.png")}
+    assert _main(["design", "ho", "--samples", "3", "--out", str(tmp_path)]) == 2

@@ -12,11 +12,13 @@ plant noise, 5 s split into five 1-s segments with ``counts[i]`` equally spaced 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import jax.numpy as jnp
 import numpy as np
 
+from .. import design
 from ..covariance import CovarianceHistory, covariance_recursion
 from ..models import LinearGaussianModel, ho_plant, sample_times, segment_schedule
 from ..sensitivity import (
@@ -168,6 +170,148 @@ def sec4_example3() -> dict:
 
 
 # --------------------------------------------------------------------------------------------
+# Sec. III: sampling-period design on the Sec. III-E plant (algorithms in jaxtrack.design)
+
+
+def segment_problem(g: float = 1.0, *, smoothed: bool = False) -> design.SegmentProblem:
+    """The five 1-s segments of Sec. III-E as a :class:`~jaxtrack.design.SegmentProblem` (J = P_T(1,1))."""
+
+    def model_fn(taus):
+        return ho_plant(taus, g=g, measurement_var=SMOOTHED_R_COEFF / taus if smoothed else 1e4)
+
+    return design.SegmentProblem(model_fn, jnp.asarray(POSITION), 5)
+
+
+def newton_example(target: float = 1000.0, *, sensitivity: str = "sample-fixed") -> design.NewtonResult:
+    """III-A on 50 uniform samples, 1 g: the τ with P_T(1,1) = J* (spec T33)."""
+    return design.newton_uniform_period(lambda t: ho_plant(jnp.full(50, t)), 0.1, target, POSITION,
+                                        sensitivity=sensitivity)
+
+
+@functools.lru_cache(maxsize=8)
+def design_comparison(g: float = 1.0, total: int = 40, hi: int = 20, *, exchange: bool = False) -> dict:
+    """Schedules for ``total`` samples in five 1-s segments (caps 1 ≤ n_i ≤ ``hi``), with their J (ft²).
+
+    ``uniform`` (8,8,8,8,8); ``ho``: Ho's rule applied to the 50-sample uniform scheme (remove 10
+    from the least sensitive segments, 50% cap); ``relaxed``: optax on continuous counts;
+    ``gradient``: that rounded and polished by the 1-exchange local search; ``optimum``: the
+    exhaustive integer search; with ``exchange=True`` also ``exchange``: Ho's exchange algorithm
+    with the corrected condition, from the uniform scheme (slower: sensitivities at every move).
+    Cached: the same arguments return the same (do not mutate it) dict.
+    """
+    problem = segment_problem(g)
+    uniform = (total // 5,) * 5
+    ho_counts = design.ho_reduction(problem, UNIFORM, sum(UNIFORM) - total)
+    relaxed = design.relaxed_segment_design(problem, total, hi=hi)
+    rounded = design.round_counts(relaxed.counts, total, 1, hi)
+    polished, J_polished = design.local_search(problem, rounded, hi=hi)
+    best, J_best, n_schemes = design.exhaustive_counts(problem, total, hi=hi)
+    out = {
+        "uniform": (uniform, problem.cost(uniform)),
+        "ho": (ho_counts, problem.cost(ho_counts)),
+        "relaxed": (tuple(np.round(relaxed.counts, 2)), relaxed.cost),
+        "rounded": (rounded, problem.cost(rounded)),
+        "gradient": (polished, J_polished),
+        "optimum": (best, J_best),
+        "schemes_searched": n_schemes,
+    }
+    if exchange:
+        counts, _ = design.segment_exchange(problem, uniform, max_relative_change=0.25)
+        out["exchange"] = (counts, problem.cost(counts))
+    return out
+
+
+def per_step_example(g: float = 1.0, *, min_period: float = 0.0) -> design.PerStepDesign:
+    """Per-step periods for 50 samples between 0.1 s and 5.0 s (the span of the (10,…) scheme)."""
+    return design.per_step_design(lambda t: ho_plant(t, g=g), 50, 4.9, POSITION, first_time=0.1,
+                                  min_period=min_period)
+
+
+def maneuver_example(delta_g: float = 3.0, stages: int = 10, detect_time: float = 2.5, g: float = 10.0) -> dict:
+    """III-D on the 1/s² plant: at ``detect_time`` the acceleration noise rises from ``g`` to
+    ``g + delta_g`` for ``stages`` samples (the filter knows it); eq. (80) gives the period cut.
+
+    Returns ``P_{k/k}`` at detection, the nominal, uncompensated and compensated ``J_{k+m}`` (ft²)
+    and ``Δτ`` (s).
+    """
+    hist, times = history(UNIFORM, g)
+    (k,) = np.flatnonzero(np.abs(times - detect_time) < 1e-9)
+    P_k = hist.filtered_cov[k]
+
+    def model_fn(tau, a):
+        return ho_plant(jnp.full(stages, tau), g=a, initial_cov=P_k)
+
+    comp = design.maneuver_period_change(model_fn, 0.1, g, delta_g, POSITION)
+
+    def J(tau, a):
+        return float(covariance_recursion(model_fn(tau, a), first_step="predict").filtered_cov[-1, 0, 0])
+
+    tau_new = 0.1 + comp.delta_tau
+    return {"P_k": np.asarray(P_k), "delta_tau": comp.delta_tau, "tau": tau_new, "a": g + delta_g,
+            "nominal": J(0.1, g), "uncompensated": J(0.1, g + delta_g), "compensated": J(tau_new, g + delta_g),
+            "model_fn": model_fn}
+
+
+def maneuver_monte_carlo(runs: int = 20_000, seed: int = 0, **kwargs) -> dict:
+    """Monte Carlo of :func:`maneuver_example`: empirical terminal position-error variance with and
+    without the period change (truth and matched filter share the raised noise), with the 99.7%
+    half-width ``3·sqrt(2/M)`` of a variance estimate's relative error."""
+    import jax
+
+    from ..montecarlo import monte_carlo
+
+    ex = maneuver_example(**kwargs)
+    out = {"theory": {k: ex[k] for k in ("nominal", "uncompensated", "compensated")}, "runs": runs,
+           "rel_halfwidth": 3.0 * np.sqrt(2.0 / runs)}
+    for name, tau in (("uncompensated", 0.1), ("compensated", ex["tau"])):
+        mc = monte_carlo(ex["model_fn"](tau, ex["a"]), jax.random.key(seed), runs, first_step="predict", progress=False)
+        out[name] = float(mc.rmse((0,))[-1] ** 2)
+    return out
+
+
+def allocation_example(capacity: float = 25.0, now: float = 3.5, starts=(0.0, 1.5, 3.0)) -> dict:
+    """III-C: three staggered 5-s trajectories (1 g, 10 Hz nominal) share a capacity of
+    ``capacity`` Hz at real time ``now``; eqs. (77)–(78) give the rate changes.
+
+    Each trajectory's index is ``s_c = −τ² s_τ`` for a change of its period over its remaining
+    samples, time-fixed (eq. (50) at its end). Returns the stages, indices, ``Δc`` and the
+    predicted ``ΔJ = s_c Δc`` (equal across trajectories) and the actual ``ΔJ`` after
+    re-sampling the remaining time at the new rate (ft²).
+    """
+    tau = 0.1
+    L = jnp.asarray(POSITION)
+    result = {"stage": [], "s_c": [], "dJ_actual": []}
+    for start in starts:
+        k = int(round((now - start) / tau)) - 1  # current (last processed) sample index
+        remaining = 49 - k
+
+        def model_fn(t, k=k):
+            taus = jnp.concatenate([jnp.full(k + 1, tau), jnp.full(remaining, 1.0) * t])
+            return ho_plant(taus)
+
+        from ..sensitivity import sensitivity_index
+
+        s_tau = float(sensitivity_index(model_fn, tau, L))
+        P = covariance_recursion(model_fn(tau)).filtered_cov
+        s_tau += remaining / tau * float(P[-2, 0, 0] - P[-1, 0, 0])  # time-fixed, eq. (50)
+        result["stage"].append(k)
+        result["s_c"].append(-(tau**2) * s_tau)
+    rates = np.full(len(starts), 1.0 / tau)
+    dc = design.allocate_rates(rates, result["s_c"], capacity)
+    result["delta_c"] = dc
+    result["dJ_predicted"] = np.asarray(result["s_c"]) * dc
+    for k, d in zip(result["stage"], dc):
+        remaining_time = (49 - k) * tau
+        n_new = max(1, int(round(remaining_time * (1.0 / tau + d))))
+        taus = np.concatenate([np.full(k + 1, tau), np.full(n_new, remaining_time / n_new)])
+        J_new = float(covariance_recursion(ho_plant(jnp.asarray(taus))).filtered_cov[-1, 0, 0])
+        result["dJ_actual"].append(J_new - terminal_position_variance(UNIFORM, 1.0))
+    result["capacity"] = capacity
+    result["new_total_rate"] = float(np.sum(rates + dc))
+    return result
+
+
+# --------------------------------------------------------------------------------------------
 # Figures (Sec. III-E). Each returns a matplotlib Figure built from the functions above.
 
 
@@ -240,6 +384,31 @@ def figure_adjoint(g: float = 1.0):
     return fig
 
 
+def figure_designed_schedules(g: float = 1.0, comparison: dict | None = None):
+    """Covariance histories of the uniform, Ho-rule, gradient-designed and optimal 40-sample schemes
+    (and the per-step design of 50 samples), position variance against time."""
+    import matplotlib.pyplot as plt
+
+    comparison = design_comparison(g) if comparison is None else comparison
+    fig, ax = plt.subplots(figsize=(6.8, 4.2), constrained_layout=True)
+    for name in ("uniform", "ho", "gradient", "optimum"):
+        counts, J = comparison[name]
+        hist, times = history(counts, g)
+        t, p = _sawtooth(hist, times)
+        ax.plot(t, p, lw=1.0, label=f"{name}: {counts}, P_T = {J:.1f} ft²")
+    ps = per_step_example(g)
+    model = ho_plant(jnp.asarray(ps.taus), g=g)
+    t, p = _sawtooth(covariance_recursion(model), ps.times)
+    ax.plot(t, p, lw=1.0, ls="--", label=f"per-step τ_k, 50 samples, P_T = {ps.cost:.1f} ft²")
+    ax.set_yscale("log")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position error variance P(1,1) [ft²]")
+    ax.set_title(f"Designed schedules, {g:g} g (40 samples, 1 ≤ n_i ≤ 20)")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=7)
+    return fig
+
+
 def figure_one_stage_sensitivity():
     """Figs. 16–17: one-stage dimensionless sensitivity (Δp_x/p_x)/(Δτ/τ), eq. (134), a = 0 and 1."""
     import matplotlib.pyplot as plt
@@ -261,7 +430,7 @@ def figure_one_stage_sensitivity():
 # The reproduction table
 
 
-def paper_rows() -> list[PaperRow]:
+def paper_rows(include_design: bool = True) -> list[PaperRow]:
     """Every printed number of Sec. III-E and Sec. IV that jaxtrack reproduces, as table rows.
 
     Tolerances: rtol 5e-3 for the paper's values (spec §5.3; the paper's own computations differ
@@ -344,6 +513,30 @@ def paper_rows() -> list[PaperRow]:
     add(PaperRow("T32", "(p_x)_k/k at τ = 1, a = 1, r_x = 1", 0.75, ex3["p_x"], 1e-9))
     add(PaperRow("T32", "a needed at τ = 2 to keep 0.75", -1.0, ex3["a_needed"], 1e-9))
     add(PaperRow("T32", "r_x needed at τ = 2 to keep 0.75 ('about 0.8')", 0.8, ex3["r_x_needed"], printed_rtol(0.8, 0.1)))
+    if include_design:
+        rows.extend(design_rows())
+    return rows
+
+
+def design_rows() -> list[PaperRow]:
+    """Sec. III algorithm targets T33–T35 (spec §5.5; reference values, not printed in the memo)."""
+    rows: list[PaperRow] = []
+    add = rows.append
+    newton = newton_example()
+    for i, ref in enumerate((0.1, 0.145801, 0.137330, 0.137153, 0.13715278)):
+        add(PaperRow("T33", f"Newton iterate {i} of τ for J* = 1000 ft² [s]", ref, float(newton.taus[i]), 1e-5))
+    for g, ref in ((1.0, 585.8), (10.0, 1416.0)):
+        c = design_comparison(g)
+        add(PaperRow("T34", f"exhaustive optimum, 40 samples, caps [1,20], {g:g} g [ft²]", ref, c["optimum"][1], 1e-4))
+        add(PaperRow("T34", f"gradient design (optax + rounding + local search), {g:g} g [ft²]", ref, c["gradient"][1], 1e-2))
+    ho_counts = design.ho_reduction(segment_problem(1.0), UNIFORM, 10)
+    add(PaperRow("T34", "Ho's rule (10,…) − 10 samples, 1 g [ft²] (10,5,5,10,10)", 893.55,
+                 terminal_position_variance(ho_counts, 1.0), 1e-5))
+    alloc = allocation_example()
+    add(PaperRow("T35", "Σ(c_i + Δc_i) after allocation (78) [Hz]", alloc["capacity"], alloc["new_total_rate"], 1e-12))
+    dJ = alloc["dJ_predicted"]
+    for i in (1, 2):
+        add(PaperRow("T35", f"equal degradation (77): s_{i + 1}Δc_{i + 1} / s_1Δc_1", 1.0, float(dJ[i] / dJ[0]), 1e-12))
     return rows
 
 

@@ -1,6 +1,7 @@
 """The ``jaxtrack`` command line.
 
 ``jaxtrack reproduce STUDY|all`` — reproduce the studies' printed numbers (table or JSON) and figures.
+``jaxtrack design uniform|ho|gradient`` — sampling schedules for Ho's plant (table + PNG).
 ``jaxtrack demo`` — Monte Carlo of a 2-D constant-velocity tracker (table + PNG).
 """
 
@@ -14,9 +15,10 @@ import sys
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="jaxtrack", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
-    from . import _reproduce
+    from . import _design, _reproduce
 
     _reproduce.add_parser(sub)
+    _design.add_parser(sub)
     demo = sub.add_parser("demo", help="Monte Carlo of a 2-D constant-velocity tracker: RMSE/ANEES table and PNG")
     demo.add_argument("--runs", type=int, default=10_000, help="Monte Carlo runs (default 10000)")
     demo.add_argument("--steps", type=int, default=100, help="steps per run (default 100, τ = 1 s)")
@@ -34,6 +36,10 @@ def main(argv: list[str] | None = None) -> int:
         from . import _reproduce
 
         return _reproduce.main(args)
+    if args.command == "design":
+        from . import _design
+
+        return _design.run(args)
     if args.command == "demo":
         from ._demo import format_table, run_demo
 

@@ -1,0 +1,108 @@
+"""``jaxtrack design``: sampling schedules for Ho's 1/s² plant (Sec. III-A, III-B and optax designs).
+
+Every subcommand prints the designed schedule and its terminal position variance J = P_T(1,1)
+next to the uniform and Ho-rule schedules with the same sample budget, and writes a PNG of the
+covariance histories.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("design", help="design sampling schedules for Ho's plant (uniform Newton, Ho's rule, gradient)")
+    p.add_argument("method", choices=["uniform", "ho", "gradient"],
+                   help="uniform: Newton for the τ meeting --target; ho: Ho's rule (remove from the least "
+                        "sensitive segments); gradient: optax on relaxed counts + rounding + local search, and per-step τ_k")
+    p.add_argument("--g", type=float, default=1.0, help="plant-noise level in g (default 1)")
+    p.add_argument("--samples", type=int, default=40, help="sample budget over the 5 s (default 40)")
+    p.add_argument("--cap-lo", type=int, default=1, help="fewest samples per 1-s segment (default 1)")
+    p.add_argument("--cap-hi", type=int, default=20, help="most samples per 1-s segment (default 20)")
+    p.add_argument("--target", type=float, default=1000.0, help="J* in ft² for the uniform design (default 1000)")
+    p.add_argument("--out", default="results/design", help="folder for the figure")
+    p.add_argument("--json", action="store_true", help="print the rows as JSON")
+
+
+def _ho_counts(problem, samples: int) -> tuple[int, ...]:
+    from ..applications import ho_sensitivity as ho
+    from ..design import ho_reduction
+
+    start = ho.UNIFORM if samples <= 50 else tuple(int(np.ceil(samples / 5)) for _ in range(5))
+    return ho_reduction(problem, start, sum(start) - samples, cap=0.5)
+
+
+def run(args) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import jax.numpy as jnp
+    import matplotlib.pyplot as plt
+
+    from ..applications import ho_sensitivity as ho
+    from ..covariance import covariance_recursion
+    from ..design import local_search, newton_uniform_period, per_step_design, relaxed_segment_design, round_counts
+    from ..models import ho_plant
+
+    S, lo, hi = 5, args.cap_lo, args.cap_hi
+    if not (1 <= lo <= hi and S * lo <= args.samples <= S * hi):
+        print(f"jaxtrack design: need 1 ≤ cap-lo ≤ cap-hi and 5·cap-lo ≤ samples ≤ 5·cap-hi; got "
+              f"samples={args.samples}, caps=[{lo}, {hi}]", file=__import__("sys").stderr)
+        return 2
+    problem = ho.segment_problem(args.g)
+    uniform = tuple(round(c) for c in np.diff(np.round(np.linspace(0, args.samples, S + 1))))
+    rows = [{"design": "uniform", "schedule": list(uniform), "J": problem.cost(uniform)}]
+    if args.samples <= 50:
+        ho_counts = _ho_counts(problem, args.samples)
+        rows.append({"design": "Ho's rule", "schedule": list(ho_counts), "J": problem.cost(ho_counts)})
+    curves = [(r["design"], ho.history(tuple(r["schedule"]), args.g)) for r in rows]
+
+    if args.method == "uniform":
+        fn = lambda t: ho_plant(jnp.full(args.samples, t), g=args.g)  # noqa: E731
+        r = newton_uniform_period(fn, 5.0 / args.samples, args.target, ho.POSITION)
+        rows.append({"design": "Newton uniform τ (III-A)", "schedule": [float(r.taus[-1])] * args.samples,
+                     "J": float(r.costs[-1]), "iterates": [float(t) for t in r.taus]})
+        hist = covariance_recursion(fn(jnp.asarray(r.taus[-1])))
+        curves.append(("Newton", (hist, r.taus[-1] * (1 + np.arange(args.samples)))))
+    elif args.method == "gradient":
+        relaxed = relaxed_segment_design(problem, args.samples, lo=lo, hi=hi)
+        counts, J = local_search(problem, round_counts(relaxed.counts, args.samples, lo, hi), lo=lo, hi=hi)
+        rows.append({"design": "gradient (optax, relaxed)", "schedule": [round(float(c), 3) for c in relaxed.counts], "J": relaxed.cost})
+        rows.append({"design": "gradient, rounded + local search", "schedule": list(counts), "J": J})
+        curves.append(("gradient", ho.history(counts, args.g)))
+        ps = per_step_design(lambda t: ho_plant(t, g=args.g), args.samples, 5.0 - 5.0 / args.samples, ho.POSITION,
+                             first_time=5.0 / args.samples)
+        rows.append({"design": "per-step τ_k (optax)", "schedule": [round(float(t), 4) for t in ps.times], "J": ps.cost})
+        curves.append(("per-step τ_k", (covariance_recursion(ho_plant(jnp.asarray(ps.taus), g=args.g)), ps.times)))
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(6.8, 4.2), constrained_layout=True)
+    for name, (hist, times) in curves:
+        t = np.repeat(np.asarray(times), 2)
+        p = np.stack([np.asarray(hist.predicted_cov[:, 0, 0]), np.asarray(hist.filtered_cov[:, 0, 0])], axis=1).ravel()
+        ax.plot(t, p, lw=1.0, label=f"{name}: P_T = {float(hist.filtered_cov[-1, 0, 0]):.1f} ft²")
+    ax.set_yscale("log")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position error variance P(1,1) [ft²]")
+    ax.set_title(f"jaxtrack design {args.method}: {args.g:g} g, {args.samples} samples")
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=8)
+    figure = out / f"design_{args.method}.png"
+    fig.savefig(figure, dpi=120)
+    plt.close(fig)
+
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"{'design':<34} {'J = P_T(1,1) [ft²]':>20}  schedule")
+    for r in rows:
+        sched = r["schedule"]
+        text = f"τ = {sched[0]:.8f} s × {len(sched)}" if r["design"].startswith("Newton") else (
+            f"sample times {sched[:3]} … {sched[-2:]}" if r["design"].startswith("per-step") else str(tuple(sched)))
+        print(f"{r['design']:<34} {r['J']:>20.2f}  {text}")
+    print(f"figure: {figure}")
+    return 0

@@ -1,0 +1,618 @@
+r"""Sampling-schedule design (Ho 1968, Sec. III): Newton, segment exchange, gradient schedules with optax.
+
+A designer has a budget of measurements (or of computation) and wants the schedule with the
+smallest terminal error ``J = tr(L_{T/T} P_{T/T})``, or the period that just meets a requirement
+``J*``. Every method here evaluates ``J`` with the data-free covariance recursion
+(:func:`jaxtrack.covariance.covariance_recursion`) and its derivatives with
+:mod:`jaxtrack.sensitivity` (Ho's analytic recursions by default; ``method=Autodiff()`` gives the
+same numbers).
+
+- :func:`newton_uniform_period` — III-A, eqs. (65)–(67): the uniform τ meeting ``J*``.
+- :class:`SegmentProblem` — Ho's piecewise-uniform schedules: time split into equal segments,
+  ``n_i`` equally spaced samples in segment ``i`` (Convention 2 of ``specs/ho-sensitivity.md``).
+- :func:`ho_reduction`, :func:`segment_exchange` — III-B, eqs. (68)–(74), with the corrected
+  optimality condition (equal ``∂J/∂n_i = −s_i τ_i²/D_i``, not equal ``s_i``; spec §6 item 10).
+- :func:`relaxed_segment_design`, :func:`round_counts`, :func:`local_search`,
+  :func:`exhaustive_counts` — gradient design over continuous sample counts with caps, rounding
+  and an integer local search, and the brute-force optimum to judge them by.
+- :func:`per_step_design` — one period per step (fixed number of samples over a fixed span).
+- :func:`allocate_rates` — III-C, eqs. (75)–(78): real-time rate allocation across trajectories.
+- :func:`maneuver_period_change` — III-D, eqs. (79)–(80): the period cut that offsets a detected
+  increase of the acceleration noise.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+from typing import Literal, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jaxtyping import Array, ArrayLike
+
+from ._validation import InputError
+from .covariance import covariance_recursion
+from .models import LinearGaussianModel, segment_schedule
+from .sensitivity import Analytic, segment_sensitivity, sensitivity_index
+
+__all__ = [
+    "NewtonResult",
+    "newton_uniform_period",
+    "SegmentProblem",
+    "ho_reduction",
+    "segment_exchange",
+    "exhaustive_counts",
+    "RelaxedDesign",
+    "relaxed_segment_design",
+    "round_counts",
+    "local_search",
+    "PerStepDesign",
+    "per_step_design",
+    "allocate_rates",
+    "ManeuverCompensation",
+    "maneuver_period_change",
+]
+
+Objective = Literal["terminal", "running"]
+
+
+def _weight(weight, n) -> Array:
+    L = jnp.asarray(weight, dtype=jnp.result_type(float))
+    if L.shape != (n, n):
+        raise InputError(f"`weight` (L_T/T) must have shape ({n}, {n}); got {L.shape}.")
+    return L
+
+
+# ----------------------------------------------------------------------------------------------
+# III-A: uniform period by Newton's method
+
+
+class NewtonResult(NamedTuple):
+    """Iterates of :func:`newton_uniform_period`: ``taus`` ``(i+1,)`` s and ``costs`` ``(i+1,)`` (J at each)."""
+
+    taus: np.ndarray
+    costs: np.ndarray
+    converged: bool
+
+
+def newton_uniform_period(
+    model_fn: Callable[[Array], LinearGaussianModel],
+    tau0: float,
+    target: float,
+    weight: ArrayLike,
+    *,
+    step_factor: float = 1.0,
+    sensitivity: Literal["sample-fixed", "time-fixed"] = "sample-fixed",
+    tol: float = 1e-9,
+    max_iter: int = 20,
+    method=Analytic(),
+) -> NewtonResult:
+    r"""The uniform sampling period with ``tr(L P_T) = J*`` (Ho 1968, Sec. III-A, eqs. (65)–(67)).
+
+    .. math::
+
+        τ_{i+1} = τ_i + λ\,\frac{J^* − \mathrm{tr}(L_{T/T}(P_{T/T})_i)}{\mathrm{tr}(L_{T/T}(∂P_{T/T}/∂τ)_i)}
+        \qquad (66),\ (67)
+
+    ``∂P_{T/T}/∂τ`` comes from (46)–(47) (``sensitivity="sample-fixed"``: the number of samples is
+    fixed, the horizon moves) or adds the time-fixed correction (50) with ``k = T`` intervals
+    (``"time-fixed"``, the memo's note for a fixed horizon; spec §6 item 21). ``λ < 1`` damps the
+    step when the plain iteration does not converge (the memo proves nothing about convergence).
+
+    **Arguments:** ``model_fn`` ``τ -> LinearGaussianModel`` (fixed number of samples),
+    ``tau0`` s, ``target`` ``J*`` (units of J), ``weight`` ``L_{T/T}``, ``step_factor`` λ,
+    ``tol`` (stop when ``|J − J*| ≤ tol·J*``), ``max_iter``, ``method``.
+
+    **Returns:** :class:`NewtonResult` with every iterate (``taus[0] = tau0``).
+    """
+    if sensitivity not in ("sample-fixed", "time-fixed"):
+        raise InputError(f"`sensitivity` must be 'sample-fixed' or 'time-fixed'; got {sensitivity!r}.")
+    if not 0 < step_factor <= 1:
+        raise InputError(f"`step_factor` (λ) must be in (0, 1]; got {step_factor}.")
+    if target <= 0:
+        raise InputError(f"`target` (J*) must be positive; got {target}.")
+    L = _weight(weight, model_fn(jnp.asarray(tau0)).state_dim)
+
+    @jax.jit
+    def cost_and_slope(tau):
+        P = covariance_recursion(model_fn(tau)).filtered_cov
+        J = jnp.trace(L @ P[-1])
+        dJ = sensitivity_index(model_fn, tau, L, method=method)
+        if sensitivity == "time-fixed":
+            T = P.shape[0] - 1
+            dJ = dJ + (T / tau) * jnp.trace(L @ (P[-2] - P[-1]))  # eq. (50) at the last sample
+        return J, dJ
+
+    taus, costs = [float(tau0)], []
+    converged = False
+    for _ in range(max_iter):
+        J, dJ = (float(v) for v in cost_and_slope(jnp.asarray(taus[-1])))
+        costs.append(J)
+        if abs(J - target) <= tol * abs(target):
+            converged = True
+            break
+        taus.append(taus[-1] + step_factor * (target - J) / dJ)
+        if not np.isfinite(taus[-1]) or taus[-1] <= 0:
+            raise InputError(
+                f"Newton step left the feasible region (τ = {taus[-1]:.4g}); use a smaller `step_factor` "
+                "or a closer `tau0`."
+            )
+    else:
+        costs.append(float(cost_and_slope(jnp.asarray(taus[-1]))[0]))
+        converged = abs(costs[-1] - target) <= tol * abs(target)
+    return NewtonResult(np.array(taus), np.array(costs[: len(taus)]), converged)
+
+
+# ----------------------------------------------------------------------------------------------
+# III-B: piecewise-uniform schedules
+
+
+class SegmentProblem(eqx.Module):
+    """Ho's piecewise-uniform schedule design problem (Sec. III-B, III-E).
+
+    The horizon is split into ``num_segments`` segments of ``segment_duration`` seconds; segment
+    ``i`` holds ``n_i`` equally spaced samples, the prior sits on the first sample, the last
+    sample ends the horizon (Convention 2). ``model_fn(taus)`` builds the model from the per-step
+    periods ``(N,)`` (e.g. ``lambda t: ho_plant(t, g=10.0)``); ``J = tr(weight · P_T)``.
+    """
+
+    model_fn: Callable[[Array], LinearGaussianModel] = eqx.field(static=True)
+    weight: Array
+    num_segments: int = eqx.field(static=True)
+    segment_duration: float = eqx.field(static=True, default=1.0)
+
+    def check(self, counts) -> tuple[int, ...]:
+        counts = tuple(int(c) for c in counts)
+        if len(counts) != self.num_segments or min(counts) < 1:
+            raise InputError(f"`counts` must be {self.num_segments} positive ints; got {counts}.")
+        return counts
+
+    def taus(self, counts) -> Array:
+        return segment_schedule(self.check(counts), self.segment_duration)
+
+    def cost(self, counts) -> float:
+        """``J`` of an integer scheme."""
+        return float(_terminal_cost(self, self.taus(counts)))
+
+    def segment_sensitivities(self, counts, method=Analytic()):
+        """Time-fixed ``s_i`` and sample-fixed ``∂J/∂τ_i`` (Convention 3)."""
+        counts = self.check(counts)
+
+        def fn(segment_taus):
+            taus = jnp.repeat(segment_taus, jnp.asarray(counts), total_repeat_length=sum(counts))
+            return self.model_fn(taus)
+
+        taus = self.segment_duration / jnp.asarray(counts, dtype=float)
+        return segment_sensitivity(fn, taus, counts, self.weight, method=method)
+
+    def count_gradient(self, counts, method=Analytic()) -> np.ndarray:
+        r"""``∂J/∂n_i = −s_i τ_i²/D`` (chain rule through ``τ_i = D/n_i``): the quantity whose
+        equality across segments is the optimality condition (spec §3.2, correcting eq. (74))."""
+        counts = self.check(counts)
+        s = self.segment_sensitivities(counts, method).time_fixed
+        tau = self.segment_duration / np.asarray(counts, float)
+        return -s * tau**2 / self.segment_duration
+
+
+@eqx.filter_jit
+def _terminal_cost(problem: SegmentProblem, taus: Array) -> Array:
+    P_T = covariance_recursion(problem.model_fn(taus)).filtered_cov[-1]
+    return jnp.trace(problem.weight @ P_T)
+
+
+def ho_reduction(problem: SegmentProblem, counts: Sequence[int], remove: int, *, cap: float = 0.5) -> tuple[int, ...]:
+    """The memo's use of III-B in its example: remove ``remove`` samples from the segments with the
+    lowest time-fixed ``s_i``, at most ``cap·n_i`` from each (Sec. III-E: (10,…) → (10,5,5,10,10)).
+
+    **Returns:** the new counts.
+    """
+    counts = list(problem.check(counts))
+    if not 0 <= remove < sum(counts) - len(counts) + 1:
+        raise InputError(f"`remove` must leave at least one sample per segment; got {remove}.")
+    s = problem.segment_sensitivities(counts).time_fixed
+    left = remove
+    for i in np.argsort(s):
+        take = min(left, int(np.floor(cap * counts[i])), counts[i] - 1)
+        counts[i] -= take
+        left -= take
+        if left == 0:
+            break
+    if left:
+        raise InputError(f"the cap {cap} allows removing only {remove - left} of {remove} samples.")
+    return tuple(counts)
+
+
+def segment_exchange(
+    problem: SegmentProblem,
+    counts: Sequence[int],
+    *,
+    max_relative_change: float = 0.25,
+    condition: Literal["count-gradient", "equal-s"] = "count-gradient",
+    max_iter: int = 50,
+) -> tuple[tuple[int, ...], list[float]]:
+    r"""Ho's segment-exchange algorithm (Sec. III-B, Fig. 5) at a fixed total sample count.
+
+    Each pass computes the sensitivities, then moves samples from the segment where they help
+    least (``u``) to the one where they help most (``l``), as many as the linearity constraint (73)
+    allows (``|Δτ_i|/τ_i ≤ max_relative_change`` in both segments, at least one sample). With
+    ``condition="count-gradient"`` "help" is measured by ``∂J/∂n_i = −s_iτ_i²/D`` (the correct
+    first-order condition, spec §6 item 10); ``"equal-s"`` uses the memo's ``s_i`` (74), which
+    coincides only when all ``τ_i²/D_i`` are equal. A move is kept only if ``J`` falls; the
+    algorithm stops when no move helps.
+
+    **Returns:** ``(counts, costs)`` — the final scheme and ``J`` after each accepted move.
+    """
+    counts = list(problem.check(counts))
+    costs = [problem.cost(counts)]
+    for _ in range(max_iter):
+        if condition == "count-gradient":
+            benefit = -problem.count_gradient(counts)  # J decrease per added sample
+        elif condition == "equal-s":
+            benefit = problem.segment_sensitivities(counts).time_fixed
+        else:
+            raise InputError(f"`condition` must be 'count-gradient' or 'equal-s'; got {condition!r}.")
+        improved = False
+        for u, l in ((u, l) for u in np.argsort(benefit) for l in np.argsort(-benefit) if u != l):
+            # (73): τ_u = D/n_u grows by n_u/(n_u − m) − 1 ≤ c, τ_l shrinks by m/(n_l + m) ≤ c.
+            m_u = int(np.floor(counts[u] * max_relative_change / (1 + max_relative_change)))
+            m_l = int(np.floor(counts[l] * max_relative_change / (1 - max_relative_change)))
+            m = max(1, min(m_u, m_l, counts[u] - 1))
+            if counts[u] - m < 1:
+                continue
+            trial = list(counts)
+            trial[u] -= m
+            trial[l] += m
+            J = problem.cost(trial)
+            if J < costs[-1]:
+                counts, improved = trial, True
+                costs.append(J)
+                break
+        if not improved:
+            break
+    return tuple(counts), costs
+
+
+def _compositions(total: int, parts: int, lo: int, hi: int) -> np.ndarray:
+    """All integer vectors with ``parts`` entries in [lo, hi] summing to ``total``."""
+    rows = []
+    for head in itertools.product(range(lo, hi + 1), repeat=parts - 1):
+        last = total - sum(head)
+        if lo <= last <= hi:
+            rows.append((*head, last))
+    return np.array(rows, dtype=int)
+
+
+def exhaustive_counts(problem: SegmentProblem, total: int, *, lo: int = 1, hi: int | None = None, chunk: int = 4096) -> tuple[tuple[int, ...], float, int]:
+    """Brute-force integer optimum: ``J`` of every scheme with ``Σn_i = total``, ``lo ≤ n_i ≤ hi``,
+    evaluated in vmapped chunks. **Returns:** ``(counts, J, number_of_schemes)``."""
+    hi = total if hi is None else hi
+    schemes = _compositions(total, problem.num_segments, lo, hi)
+    if len(schemes) == 0:
+        raise InputError(f"no scheme of {problem.num_segments} segments in [{lo}, {hi}] sums to {total}.")
+    D = problem.segment_duration
+    taus = np.stack([np.repeat(D / s, s) for s in schemes])  # (S, total)
+    cost = jax.jit(jax.vmap(lambda t: _terminal_cost(problem, t)))
+    values = np.concatenate([np.asarray(cost(jnp.asarray(taus[i:i + chunk]))) for i in range(0, len(taus), chunk)])
+    best = int(np.argmin(values))
+    return tuple(int(c) for c in schemes[best]), float(values[best]), len(schemes)
+
+
+# ----------------------------------------------------------------------------------------------
+# Gradient design over relaxed (continuous) sample counts
+
+
+class RelaxedDesign(NamedTuple):
+    """Result of :func:`relaxed_segment_design`.
+
+    - ``counts``: the continuous optimum ``(S,)``; ``cost``: its relaxed ``J``;
+    - ``history``: relaxed ``J`` per optimiser step.
+    """
+
+    counts: np.ndarray
+    cost: float
+    history: np.ndarray
+
+
+def _project_capped_simplex(x: Array, total: float, lo: Array, hi: Array) -> Array:
+    """Euclidean projection onto ``{lo ≤ y ≤ hi, Σy = total}`` (bisection on the shift)."""
+
+    def excess(shift):
+        return jnp.sum(jnp.clip(x - shift, lo, hi)) - total
+
+    a, b = jnp.min(x - hi) - 1.0, jnp.max(x - lo) + 1.0
+
+    def body(_, ab):
+        a, b = ab
+        mid = 0.5 * (a + b)
+        pos = excess(mid) > 0
+        return jnp.where(pos, mid, a), jnp.where(pos, b, mid)
+
+    a, b = jax.lax.fori_loop(0, 100, body, (a, b))
+    return jnp.clip(x - 0.5 * (a + b), lo, hi)
+
+
+def _relaxed_cost(problem: SegmentProblem, counts: Array, cap: int, objective: Objective) -> Array:
+    """``J`` of continuous counts: each segment has ``cap`` sample slots of period ``D/n_i``; slot
+    ``j`` is active with weight ``g = clip(n_i − j, 0, 1)`` (time advance ``g·τ_i``, measurement
+    noise ``R/g``). At integer ``n_i`` this is exactly the integer scheme; in between, the last
+    sample of a segment is a fractional one."""
+    D = problem.segment_duration
+    S = problem.num_segments
+    j = jnp.arange(cap, dtype=counts.dtype)
+    # Slot 0 of segment 1 carries the prior (first_step="update"): always fully active.
+    gate = jnp.clip(counts[:, None] - j[None, :], 0.0, 1.0).at[0, 0].set(1.0)
+    tau = (D / counts)[:, None] * jnp.ones((1, cap), counts.dtype)
+    g = gate.reshape(S * cap)
+    taus = (tau.reshape(S * cap)) * g + (1.0 - g) * 1e-12
+    model = problem.model_fn(taus)
+    g_floor = jnp.maximum(g, 1e-12)
+    R = jax.vmap(model.measurement_noise_cov)(jnp.arange(S * cap)) / g_floor[:, None, None]
+    F = jax.vmap(model.transition_matrix)(jnp.arange(S * cap))
+    Q = jax.vmap(model.process_noise_cov)(jnp.arange(S * cap))
+    model = eqx.tree_at(lambda m: (m.F, m.Q, m.R), model, (F, Q, R))
+    P = covariance_recursion(model).filtered_cov
+    if objective == "terminal":
+        return jnp.trace(problem.weight @ P[-1])
+    return jnp.sum(g * jnp.einsum("ij,kji->k", problem.weight, P))
+
+
+def relaxed_segment_design(
+    problem: SegmentProblem,
+    total: int,
+    *,
+    lo: int = 1,
+    hi: int = 20,
+    objective: Objective = "terminal",
+    steps: int = 300,
+    learning_rate: float = 0.2,
+    init: Sequence[float] | None = None,
+) -> RelaxedDesign:
+    r"""Gradient design of per-segment sample counts relaxed to continuous values (optax Adam).
+
+    Minimises ``tr(L P_T)`` (``objective="terminal"``) or the running cost ``Σ_k tr(L P_{k/k})``
+    (``"running"``) over ``lo ≤ n_i ≤ hi``, ``Σ n_i = total`` by projected Adam steps (the
+    projection onto the capped simplex follows every step). The terminal-only cost is degenerate
+    without the cap ``hi``: samples pile into the last segment (spec §5.5). Round the result with
+    :func:`round_counts` and polish it with :func:`local_search`.
+
+    **Returns:** :class:`RelaxedDesign`.
+    """
+    S = problem.num_segments
+    if not S * lo <= total <= S * hi:
+        raise InputError(f"`total` = {total} is infeasible with {S} segments in [{lo}, {hi}].")
+    if objective not in ("terminal", "running"):
+        raise InputError(f"`objective` must be 'terminal' or 'running'; got {objective!r}.")
+    x0 = jnp.full(S, total / S) if init is None else jnp.asarray(init, dtype=float)
+    lo_a, hi_a = jnp.full(S, float(lo)), jnp.full(S, float(hi))
+    opt = optax.adam(learning_rate)
+
+    @jax.jit
+    def run(x0):
+        def step(carry, _):
+            x, state = carry
+            J, grad = jax.value_and_grad(_relaxed_cost, argnums=1)(problem, x, hi, objective)
+            # Adam normalises each coordinate, so a common component of the gradient (all n_i
+            # want more samples) would swamp the differences that matter under Σn_i = total:
+            # keep only the part tangent to the constraint before the step.
+            updates, state = opt.update(grad - jnp.mean(grad), state)
+            x = _project_capped_simplex(optax.apply_updates(x, updates), float(total), lo_a, hi_a)
+            return (x, state), J
+
+        x0p = _project_capped_simplex(x0, float(total), lo_a, hi_a)
+        (x, _), hist = jax.lax.scan(step, (x0p, opt.init(x0p)), None, length=steps)
+        return x, hist, _relaxed_cost(problem, x, hi, objective)
+
+    x, hist, J = run(x0)
+    return RelaxedDesign(np.asarray(x), float(J), np.asarray(hist))
+
+
+def round_counts(counts: ArrayLike, total: int, lo: int = 1, hi: int | None = None) -> tuple[int, ...]:
+    """Largest-remainder rounding of continuous counts to integers with ``Σ = total`` within [lo, hi]."""
+    x = np.asarray(counts, float)
+    hi = total if hi is None else hi
+    base = np.clip(np.floor(x), lo, hi).astype(int)
+    order = np.argsort(-(x - np.floor(x)))
+    i = 0
+    while base.sum() < total:
+        k = order[i % len(x)]
+        if base[k] < hi:
+            base[k] += 1
+        i += 1
+    i = 0
+    while base.sum() > total:
+        k = order[::-1][i % len(x)]
+        if base[k] > lo:
+            base[k] -= 1
+        i += 1
+    return tuple(int(c) for c in base)
+
+
+def local_search(problem: SegmentProblem, counts: Sequence[int], *, lo: int = 1, hi: int | None = None, max_iter: int = 100) -> tuple[tuple[int, ...], float]:
+    """Integer polish: move one sample between any two segments while ``J`` falls (best move first).
+
+    **Returns:** ``(counts, J)`` at a 1-exchange local optimum.
+    """
+    counts = list(problem.check(counts))
+    hi = sum(counts) if hi is None else hi
+    best = problem.cost(counts)
+    for _ in range(max_iter):
+        trials = []
+        for u, l in itertools.permutations(range(len(counts)), 2):
+            if counts[u] - 1 >= lo and counts[l] + 1 <= hi:
+                t = list(counts)
+                t[u] -= 1
+                t[l] += 1
+                trials.append(t)
+        if not trials:
+            break
+        D = problem.segment_duration
+        taus = jnp.asarray(np.stack([np.repeat(D / np.array(t, float), t) for t in trials]))
+        values = np.asarray(jax.vmap(lambda x: _terminal_cost(problem, x))(taus))
+        k = int(np.argmin(values))
+        if values[k] >= best:
+            break
+        counts, best = trials[k], float(values[k])
+    return tuple(counts), best
+
+
+# ----------------------------------------------------------------------------------------------
+# Per-step periods
+
+
+class PerStepDesign(NamedTuple):
+    """Result of :func:`per_step_design`: ``taus`` ``(N,)`` (``taus[0]`` unused: the prior sits on
+    the first sample), ``times`` ``(N,)`` sample times, ``cost`` J, ``history`` J per step."""
+
+    taus: np.ndarray
+    times: np.ndarray
+    cost: float
+    history: np.ndarray
+
+
+def per_step_design(
+    model_fn: Callable[[Array], LinearGaussianModel],
+    num_samples: int,
+    span: float,
+    weight: ArrayLike,
+    *,
+    first_time: float | None = None,
+    min_period: float = 0.0,
+    objective: Objective = "terminal",
+    steps: int = 400,
+    learning_rate: float = 0.05,
+) -> PerStepDesign:
+    r"""One sampling period per step, optimised with optax (fixed sample count, fixed span).
+
+    The ``N − 1`` intervals between the first and the last sample are
+    ``τ_k = τ_min + (span − (N−1)τ_min)·softmax(θ)_k``, so they are positive, at least
+    ``min_period`` (a radar's fastest revisit) and sum to ``span`` for every θ; Adam minimises
+    ``tr(L P_T)`` or ``Σ_k tr(L P_{k/k})`` over θ, starting from the uniform schedule. The prior
+    sits on the first sample (``first_step="update"``).
+
+    **Arguments:** ``model_fn`` ``taus (N,) -> LinearGaussianModel``, ``num_samples`` N,
+    ``span`` seconds from the first to the last sample, ``weight`` L, ``first_time`` (only for the
+    returned ``times``; defaults to ``span/(N−1)``), ``min_period``, ``objective``, ``steps``,
+    ``learning_rate``.
+
+    **Returns:** :class:`PerStepDesign`.
+    """
+    N = int(num_samples)
+    if N < 2:
+        raise InputError(f"`num_samples` must be at least 2; got {num_samples}.")
+    if not 0 <= min_period * (N - 1) < span:
+        raise InputError(f"`min_period` × (N − 1) must be below `span`; got {min_period} × {N - 1} ≥ {span}.")
+    L = _weight(weight, model_fn(jnp.full(N, span / (N - 1))).state_dim)
+    free = span - (N - 1) * min_period
+
+    def taus_of(theta):
+        intervals = min_period + free * jax.nn.softmax(theta)
+        return jnp.concatenate([intervals[:1], intervals])  # taus[0] is unused
+
+    def cost(theta):
+        P = covariance_recursion(model_fn(taus_of(theta))).filtered_cov
+        if objective == "terminal":
+            return jnp.trace(L @ P[-1])
+        return jnp.sum(jnp.einsum("ij,kji->k", L, P))
+
+    opt = optax.adam(learning_rate)
+
+    @jax.jit
+    def run(theta):
+        def step(carry, _):
+            theta, state = carry
+            J, g = jax.value_and_grad(cost)(theta)
+            updates, state = opt.update(g / (jnp.abs(J) + 1e-30), state)
+            return (optax.apply_updates(theta, updates), state), J
+
+        (theta, _), hist = jax.lax.scan(step, (theta, opt.init(theta)), None, length=steps)
+        return theta, hist, cost(theta)
+
+    theta, hist, J = run(jnp.zeros(N - 1))
+    taus = np.asarray(taus_of(theta))
+    t0 = span / (N - 1) if first_time is None else first_time
+    times = t0 + np.concatenate([[0.0], np.cumsum(taus[1:])])
+    return PerStepDesign(taus, times, float(J), np.asarray(hist))
+
+
+# ----------------------------------------------------------------------------------------------
+# III-C and III-D
+
+
+def allocate_rates(rates: ArrayLike, sensitivities: ArrayLike, capacity: float) -> np.ndarray:
+    r"""Real-time rate changes that equalise the terminal degradations (Ho 1968, eqs. (75)–(78)).
+
+    .. math::
+
+        s^{(1)}Δc_1 = s^{(2)}Δc_2 = …,\qquad \sum_i (c_i + Δc_i) = \mathcal{L}
+
+        Δc_1 = \frac{\mathcal{L} − \sum_i c_i}{s^{(1)}\sum_i 1/s^{(i)}},\qquad
+        Δc_i = s^{(1)}Δc_1/s^{(i)} \qquad (78)
+
+    ``s^{(i)} = ∂J^{(i)}/∂c_i`` is trajectory i's sensitivity to its iteration rate from its current
+    stage to its end (with ``c = 1/τ``, ``s_c = −τ² s_τ``). If ``Σc_i > ℒ`` every ``Δc_i < 0`` and
+    each trajectory loses the same ``ΔJ = s Δc > 0``.
+
+    **Arguments:** ``rates`` ``c_i`` ``(m,)`` (Hz), ``sensitivities`` ``s^{(i)}`` ``(m,)`` (nonzero;
+    any sign), ``capacity`` ℒ (Hz). **Returns:** ``Δc`` ``(m,)``.
+    """
+    c = np.asarray(rates, float)
+    s = np.asarray(sensitivities, float)
+    if c.shape != s.shape or c.ndim != 1:
+        raise InputError(f"`rates` and `sensitivities` must be 1-D of one length; got {c.shape}, {s.shape}.")
+    if np.any(s == 0) or not np.all(np.isfinite(s)):
+        raise InputError("`sensitivities` must be finite and nonzero (eq. (78) divides by each).")
+    inv = np.sum(1.0 / s)
+    if inv == 0:
+        raise InputError("Σ 1/s_i = 0: the equal-degradation allocation (78) has no solution.")
+    dc1 = (capacity - c.sum()) / (s[0] * inv)
+    return s[0] * dc1 / s
+
+
+class ManeuverCompensation(NamedTuple):
+    """Result of :func:`maneuver_period_change`: ``delta_tau`` (s) and the indices it used,
+    ``s_tau = ∂J_{k+m}/∂τ`` and ``s_a = ∂J_{k+m}/∂a`` (units of J per s and per unit of a)."""
+
+    delta_tau: float
+    s_tau: float
+    s_a: float
+
+
+def maneuver_period_change(
+    model_fn: Callable[[Array, Array], LinearGaussianModel],
+    tau: float,
+    a: float,
+    delta_a: float,
+    weight: ArrayLike,
+    *,
+    time_fixed: bool = False,
+    method=Analytic(),
+) -> ManeuverCompensation:
+    r"""Period change that offsets an acceleration-noise increase (Ho 1968, Sec. III-D, (79)–(80)).
+
+    .. math::  Δτ = −\Big(\frac{∂J_{k+m}}{∂τ}\Big)^{-1}\frac{∂J_{k+m}}{∂a}\,Δa \qquad (80)
+
+    ``model_fn(τ, a)`` is the ``m``-stage model from the detection stage ``k`` (its
+    ``initial_cov`` = ``P_{k/k}``, use ``first_step="predict"`` semantics: every stage predicts),
+    with the acceleration-noise level ``a``; the indices are run with zero initial sensitivities
+    at ``k`` (the memo's "zero initial values"). ``time_fixed=True`` adds the correction (50)
+    with ``k = m`` to ``∂J/∂τ``. ``m = 1`` is eq. (79).
+
+    **Returns:** :class:`ManeuverCompensation`.
+    """
+    L = jnp.asarray(weight, dtype=jnp.result_type(float))
+
+    def J_of(tau_, a_):
+        return covariance_recursion(model_fn(tau_, a_), first_step="predict").filtered_cov
+
+    s_tau = sensitivity_index(lambda t: model_fn(t, jnp.asarray(a)), tau, L, method=method, first_step="predict")
+    s_a = sensitivity_index(lambda x: model_fn(jnp.asarray(tau), x), a, L, method=method, first_step="predict")
+    if time_fixed:
+        P = J_of(jnp.asarray(tau), jnp.asarray(a))
+        m = P.shape[0]
+        s_tau = s_tau + (m / tau) * jnp.trace(L @ ((P[-2] if m > 1 else model_fn(tau, a).initial_cov) - P[-1]))
+    s_tau, s_a = float(s_tau), float(s_a)
+    return ManeuverCompensation(-s_a * delta_a / s_tau, s_tau, s_a)
