@@ -13,6 +13,7 @@ from ..applications._report import format_rows
 # study name → (module with `reproduce(out_dir) -> (rows, figures)`, table title)
 STUDIES = {
     "ho": ("jaxtrack.applications.ho_sensitivity", "Ho 1968, Kalman filter sensitivity (specs/ho-sensitivity.md)"),
+    "bias": ("jaxtrack.applications.radar_bias", "Radar bias: absolute from relative bias, reduced-state filter (specs/radar-bias.md)"),
 }
 
 
