@@ -117,15 +117,8 @@ def newton_uniform_period(
         raise InputError(f"`target` (J*) must be positive; got {target}.")
     L = _weight(weight, model_fn(jnp.asarray(tau0)).state_dim)
 
-    @jax.jit
     def cost_and_slope(tau):
-        P = covariance_recursion(model_fn(tau)).filtered_cov
-        J = jnp.trace(L @ P[-1])
-        dJ = sensitivity_index(model_fn, tau, L, method=method)
-        if sensitivity == "time-fixed":
-            T = P.shape[0] - 1
-            dJ = dJ + (T / tau) * jnp.trace(L @ (P[-2] - P[-1]))  # eq. (50) at the last sample
-        return J, dJ
+        return _newton_cost_and_slope(model_fn, tau, L, sensitivity, method)
 
     taus, costs = [float(tau0)], []
     converged = False
@@ -145,6 +138,17 @@ def newton_uniform_period(
         costs.append(float(cost_and_slope(jnp.asarray(taus[-1]))[0]))
         converged = abs(costs[-1] - target) <= tol * abs(target)
     return NewtonResult(np.array(taus), np.array(costs[: len(taus)]), converged)
+
+
+@eqx.filter_jit
+def _newton_cost_and_slope(model_fn, tau, L, sensitivity, method):
+    P = covariance_recursion(model_fn(tau)).filtered_cov
+    J = jnp.trace(L @ P[-1])
+    dJ = sensitivity_index(model_fn, tau, L, method=method)
+    if sensitivity == "time-fixed":
+        T = P.shape[0] - 1
+        dJ = dJ + (T / tau) * jnp.trace(L @ (P[-2] - P[-1]))  # eq. (50) at the last sample
+    return J, dJ
 
 
 # ----------------------------------------------------------------------------------------------
@@ -387,27 +391,29 @@ def relaxed_segment_design(
     if objective not in ("terminal", "running"):
         raise InputError(f"`objective` must be 'terminal' or 'running'; got {objective!r}.")
     x0 = jnp.full(S, total / S) if init is None else jnp.asarray(init, dtype=float)
-    lo_a, hi_a = jnp.full(S, float(lo)), jnp.full(S, float(hi))
+    x, hist, J = _relaxed_run(problem, x0, float(total), float(lo), int(hi), objective, int(steps), float(learning_rate))
+    return RelaxedDesign(np.asarray(x), float(J), np.asarray(hist))
+
+
+@eqx.filter_jit
+def _relaxed_run(problem, x0, total, lo, hi, objective, steps, learning_rate):
+    S = problem.num_segments
+    lo_a, hi_a = jnp.full(S, lo), jnp.full(S, float(hi))
     opt = optax.adam(learning_rate)
 
-    @jax.jit
-    def run(x0):
-        def step(carry, _):
-            x, state = carry
-            J, grad = jax.value_and_grad(_relaxed_cost, argnums=1)(problem, x, hi, objective)
-            # Adam normalises each coordinate, so a common component of the gradient (all n_i
-            # want more samples) would swamp the differences that matter under Σn_i = total:
-            # keep only the part tangent to the constraint before the step.
-            updates, state = opt.update(grad - jnp.mean(grad), state)
-            x = _project_capped_simplex(optax.apply_updates(x, updates), float(total), lo_a, hi_a)
-            return (x, state), J
+    def step(carry, _):
+        x, state = carry
+        J, grad = jax.value_and_grad(_relaxed_cost, argnums=1)(problem, x, hi, objective)
+        # Adam normalises each coordinate, so a common component of the gradient (all n_i want
+        # more samples) would swamp the differences that matter under Σn_i = total: keep only
+        # the part tangent to the constraint before the step.
+        updates, state = opt.update(grad - jnp.mean(grad), state)
+        x = _project_capped_simplex(optax.apply_updates(x, updates), total, lo_a, hi_a)
+        return (x, state), J
 
-        x0p = _project_capped_simplex(x0, float(total), lo_a, hi_a)
-        (x, _), hist = jax.lax.scan(step, (x0p, opt.init(x0p)), None, length=steps)
-        return x, hist, _relaxed_cost(problem, x, hi, objective)
-
-    x, hist, J = run(x0)
-    return RelaxedDesign(np.asarray(x), float(J), np.asarray(hist))
+    x0p = _project_capped_simplex(x0, total, lo_a, hi_a)
+    (x, _), hist = jax.lax.scan(step, (x0p, opt.init(x0p)), None, length=steps)
+    return x, hist, _relaxed_cost(problem, x, hi, objective)
 
 
 def round_counts(counts: ArrayLike, total: int, lo: int = 1, hi: int | None = None) -> tuple[int, ...]:
@@ -506,36 +512,40 @@ def per_step_design(
     if not 0 <= min_period * (N - 1) < span:
         raise InputError(f"`min_period` × (N − 1) must be below `span`; got {min_period} × {N - 1} ≥ {span}.")
     L = _weight(weight, model_fn(jnp.full(N, span / (N - 1))).state_dim)
-    free = span - (N - 1) * min_period
+    if objective not in ("terminal", "running"):
+        raise InputError(f"`objective` must be 'terminal' or 'running'; got {objective!r}.")
+    theta, hist, J = _per_step_run(model_fn, jnp.zeros(N - 1), L, float(span), float(min_period), objective,
+                                   int(steps), float(learning_rate))
+    taus = np.asarray(_per_step_taus(theta, span, min_period))
+    t0 = span / (N - 1) if first_time is None else first_time
+    times = t0 + np.concatenate([[0.0], np.cumsum(taus[1:])])
+    return PerStepDesign(taus, times, float(J), np.asarray(hist))
 
-    def taus_of(theta):
-        intervals = min_period + free * jax.nn.softmax(theta)
-        return jnp.concatenate([intervals[:1], intervals])  # taus[0] is unused
 
+def _per_step_taus(theta, span, min_period):
+    N1 = theta.shape[0]
+    intervals = min_period + (span - N1 * min_period) * jax.nn.softmax(theta)
+    return jnp.concatenate([intervals[:1], intervals])  # taus[0] is unused (prior on the first sample)
+
+
+@eqx.filter_jit
+def _per_step_run(model_fn, theta0, L, span, min_period, objective, steps, learning_rate):
     def cost(theta):
-        P = covariance_recursion(model_fn(taus_of(theta))).filtered_cov
+        P = covariance_recursion(model_fn(_per_step_taus(theta, span, min_period))).filtered_cov
         if objective == "terminal":
             return jnp.trace(L @ P[-1])
         return jnp.sum(jnp.einsum("ij,kji->k", L, P))
 
     opt = optax.adam(learning_rate)
 
-    @jax.jit
-    def run(theta):
-        def step(carry, _):
-            theta, state = carry
-            J, g = jax.value_and_grad(cost)(theta)
-            updates, state = opt.update(g / (jnp.abs(J) + 1e-30), state)
-            return (optax.apply_updates(theta, updates), state), J
+    def step(carry, _):
+        theta, state = carry
+        J, g = jax.value_and_grad(cost)(theta)
+        updates, state = opt.update(g / (jnp.abs(J) + 1e-30), state)
+        return (optax.apply_updates(theta, updates), state), J
 
-        (theta, _), hist = jax.lax.scan(step, (theta, opt.init(theta)), None, length=steps)
-        return theta, hist, cost(theta)
-
-    theta, hist, J = run(jnp.zeros(N - 1))
-    taus = np.asarray(taus_of(theta))
-    t0 = span / (N - 1) if first_time is None else first_time
-    times = t0 + np.concatenate([[0.0], np.cumsum(taus[1:])])
-    return PerStepDesign(taus, times, float(J), np.asarray(hist))
+    (theta, _), hist = jax.lax.scan(step, (theta0, opt.init(theta0)), None, length=steps)
+    return theta, hist, cost(theta)
 
 
 # ----------------------------------------------------------------------------------------------
