@@ -50,3 +50,21 @@ def format_rows(rows: list[PaperRow], title: str) -> str:
     passed = sum(r.ok for r in rows)
     lines.append(f"{passed}/{len(rows)} reproduced within tolerance")
     return "\n".join(lines)
+
+
+def write_figures(out_dir, makers, dpi: int = 120) -> list[str]:
+    """Build each figure with its maker and save it as PNG: ``makers`` is ``[(file_name, make), …]``
+    with ``make() -> matplotlib Figure``. Creates ``out_dir``; returns the written paths."""
+    from pathlib import Path
+
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, make in makers:
+        fig = make()
+        fig.savefig(out / name, dpi=dpi)
+        plt.close(fig)
+        paths.append(str(out / name))
+    return paths

@@ -31,7 +31,7 @@ from ..sensitivity import (
     segment_sensitivity,
     updated_position_variance,
 )
-from ._report import PaperRow, printed_rtol
+from ._report import PaperRow, printed_rtol, write_figures
 
 UNIFORM = (10, 10, 10, 10, 10)  # Fig. 7 curve a
 COARSE = (8, 8, 8, 8, 8)  # Fig. 7 curve b
@@ -542,15 +542,8 @@ def design_rows() -> list[PaperRow]:
 
 def reproduce(out_dir) -> tuple[list[PaperRow], list[str]]:
     """Compute every row of :func:`paper_rows` and write the Sec. III-E figures as PNG into ``out_dir``."""
-    from pathlib import Path
-
-    import matplotlib.pyplot as plt
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     rows = paper_rows()
-    figures = []
-    for name, make in (
+    figures = write_figures(out_dir, [
         ("fig07_covariance_1g.png", lambda: figure_covariance_curves(1.0)),
         ("fig08_segment_sensitivity_1g.png", lambda: figure_segment_sensitivity(1.0)),
         ("fig09_adjoint_1g.png", lambda: figure_adjoint(1.0)),
@@ -560,9 +553,6 @@ def reproduce(out_dir) -> tuple[list[PaperRow], list[str]]:
         ("fig13_segment_sensitivity_smoothed_1g.png", lambda: figure_segment_sensitivity(1.0, smoothed=True)),
         ("fig13_segment_sensitivity_smoothed_10g.png", lambda: figure_segment_sensitivity(10.0, smoothed=True)),
         ("fig16_17_one_stage_sensitivity.png", figure_one_stage_sensitivity),
-    ):
-        fig = make()
-        fig.savefig(out / name, dpi=120)
-        plt.close(fig)
-        figures.append(str(out / name))
+        ("design_schedules_1g.png", lambda: figure_designed_schedules(1.0)),
+    ])
     return rows, figures

@@ -44,7 +44,7 @@ from .. import geometry
 from .._validation import InputError, check_covariance, check_finite, check_shape, is_concrete
 from ..models import LinearGaussianModel
 from ..montecarlo import simulate
-from ._report import PaperRow
+from ._report import PaperRow, write_figures
 
 __all__ = [
     # Sec. 2
@@ -1312,21 +1312,10 @@ def paper_rows() -> list[PaperRow]:
 
 def reproduce(out_dir) -> tuple[list[PaperRow], list[str]]:
     """Compute every row of :func:`paper_rows` and write the study's figures as PNG into ``out_dir``."""
-    from pathlib import Path
-
-    import matplotlib.pyplot as plt
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     rows = paper_rows()
-    figures = []
-    for name, make in (
+    figures = write_figures(out_dir, [
         ("sec2_costs.png", figure_bias_examples),
         ("sec3_gain_transient.png", figure_gain_transient),
         ("sec3_alpha_beta_plane.png", figure_alpha_beta_plane),
-    ):
-        fig = make()
-        fig.savefig(out / name, dpi=110)
-        plt.close(fig)
-        figures.append(str(out / name))
+    ], dpi=110)
     return rows, figures
