@@ -81,31 +81,45 @@ def check_symmetric(name: str, x, rtol: float = 1e-8) -> None:
 def check_covariance(name: str, x, *, definite: bool = True) -> None:
     """Raise unless ``x`` is a finite symmetric positive (semi)definite matrix or stack of them.
 
-    ``definite=False`` accepts singular covariances (e.g. a plant noise acting on one state only);
-    it still rejects eigenvalues below ``-1e-10·max|A|``. Stacks are checked in one batched
-    eigendecomposition, so a per-step model of many steps validates quickly.
+    Definiteness does not depend on units, so the eigenvalues are those of the correlation-scaled
+    matrix ``D^{-1/2} A D^{-1/2}`` (``D = diag(A)``): a covariance whose variances span many orders
+    of magnitude (a 33-state navigation model: 1e-16 rad² to 1e3 m²) is judged as fairly as a
+    well-scaled one. ``definite=False`` accepts singular covariances (e.g. a plant noise acting on
+    one state only); it still rejects correlation eigenvalues below ``-1e-10``. Stacks are checked
+    in one batched eigendecomposition, so a per-step model of many steps validates quickly.
     """
     check_finite(name, x)
     check_symmetric(name, x)
     if not is_concrete(x):
         return
     stack = _last_two(x).astype(np.float64)
-    smallest = np.linalg.eigvalsh(0.5 * (stack + np.swapaxes(stack, -1, -2)))[:, 0]
-    scale = np.maximum(np.max(np.abs(stack), axis=(-1, -2)), np.finfo(np.float64).tiny)
+    stack = 0.5 * (stack + np.swapaxes(stack, -1, -2))
+    diag = np.diagonal(stack, axis1=-2, axis2=-1)
+    negative = np.flatnonzero(np.any(diag < 0, axis=-1) | (definite & np.any(diag <= 0, axis=-1)))
+    if negative.size:
+        i = int(negative[0])
+        raise InputError(
+            f"`{name}` must be positive {'definite' if definite else 'semidefinite'}{_matrix_label(x, i)}; "
+            f"its diagonal holds {np.min(diag[i]):.3g}. Check units (e.g. variances in m², rad²) and "
+            f"that no standard deviation is zero."
+        )
+    inv_sd = np.where(diag > 0, 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0)), 1.0)
+    corr = stack * inv_sd[..., :, None] * inv_sd[..., None, :]
+    smallest = np.linalg.eigvalsh(corr)[:, 0]
     if definite:
         bad = np.flatnonzero(smallest <= 0.0)
         if bad.size:
             i = int(bad[0])
             raise InputError(
-                f"`{name}` must be positive definite{_matrix_label(x, i)}; its smallest eigenvalue "
-                f"is {smallest[i]:.3g}. Check units (e.g. variances in m², rad²) and that no "
-                f"standard deviation is zero."
+                f"`{name}` must be positive definite{_matrix_label(x, i)}; the smallest eigenvalue of "
+                f"its correlation matrix is {smallest[i]:.3g}. Check units (e.g. variances in m², "
+                f"rad²) and that no standard deviation is zero."
             )
     else:
-        bad = np.flatnonzero(smallest < -1e-10 * scale)
+        bad = np.flatnonzero(smallest < -1e-10)
         if bad.size:
             i = int(bad[0])
             raise InputError(
-                f"`{name}` must be positive semidefinite{_matrix_label(x, i)}; its smallest "
-                f"eigenvalue is {smallest[i]:.3g}."
+                f"`{name}` must be positive semidefinite{_matrix_label(x, i)}; the smallest "
+                f"eigenvalue of its correlation matrix is {smallest[i]:.3g}."
             )

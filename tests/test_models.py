@@ -426,3 +426,22 @@ def test_bad_inputs_raise_input_error_naming_argument(case):
     call, argname = _BAD_INPUTS[case]
     with pytest.raises(InputError, match=f"`{argname}`"):
         call()
+
+
+def test_covariance_check_is_independent_of_units():
+    """Definiteness is judged on the correlation matrix: variances from 1e-16 to 1e3 pass."""
+    import numpy as _np
+
+    from jaxtrack._validation import check_covariance
+
+    rng = _np.random.default_rng(0)
+    a = rng.normal(size=(6, 6))
+    corr = a @ a.T + 6 * _np.eye(6)
+    sd = _np.sqrt(_np.logspace(-16, 3, 6))
+    check_covariance("P0", sd[:, None] * corr * sd[None, :])  # must not raise
+    singular = _np.ones((3, 3)) * _np.array([1e-12, 1.0, 1e4])[None, :] ** 0.5 * _np.array([1e-12, 1.0, 1e4])[:, None] ** 0.5
+    with pytest.raises(InputError, match="P0"):
+        check_covariance("P0", singular)
+    check_covariance("Q", singular, definite=False)  # rank one: fine as a plant noise
+    with pytest.raises(InputError, match="diagonal"):
+        check_covariance("Q", _np.diag([1.0, -1.0]), definite=False)
