@@ -81,12 +81,14 @@ def check_symmetric(name: str, x, rtol: float = 1e-8) -> None:
 def check_covariance(name: str, x, *, definite: bool = True) -> None:
     """Raise unless ``x`` is a finite symmetric positive (semi)definite matrix or stack of them.
 
-    Definiteness does not depend on units, so the eigenvalues are those of the correlation-scaled
-    matrix ``D^{-1/2} A D^{-1/2}`` (``D = diag(A)``): a covariance whose variances span many orders
-    of magnitude (a 33-state navigation model: 1e-16 rad² to 1e3 m²) is judged as fairly as a
-    well-scaled one. ``definite=False`` accepts singular covariances (e.g. a plant noise acting on
-    one state only); it still rejects correlation eigenvalues below ``-1e-10``. Stacks are checked
-    in one batched eigendecomposition, so a per-step model of many steps validates quickly.
+    Definiteness does not depend on units, so a matrix passes if either its own eigenvalues or
+    those of its correlation-scaled form ``D^{-1/2} A D^{-1/2}`` (``D = diag(A)``) pass: a
+    covariance whose variances span many orders of magnitude (a 33-state navigation prior, 1e-16
+    rad² to 1e3 m²) is judged as fairly as a well-scaled one, while rounding noise in the tiny
+    entries of a discretised plant noise (which the scaling would magnify) is still tolerated.
+    ``definite=False`` accepts singular covariances (e.g. a plant noise acting on one state only)
+    but rejects eigenvalues below ``-1e-10`` (correlation form) or ``-1e-10·max|A|``. Stacks are
+    checked in batched eigendecompositions, so a per-step model of many steps validates quickly.
     """
     check_finite(name, x)
     check_symmetric(name, x)
@@ -106,8 +108,10 @@ def check_covariance(name: str, x, *, definite: bool = True) -> None:
     inv_sd = np.where(diag > 0, 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0)), 1.0)
     corr = stack * inv_sd[..., :, None] * inv_sd[..., None, :]
     smallest = np.linalg.eigvalsh(corr)[:, 0]
+    raw = np.linalg.eigvalsh(stack)[:, 0]
+    scale = np.maximum(np.max(np.abs(stack), axis=(-1, -2)), np.finfo(np.float64).tiny)
     if definite:
-        bad = np.flatnonzero(smallest <= 0.0)
+        bad = np.flatnonzero((smallest <= 0.0) & (raw <= 0.0))
         if bad.size:
             i = int(bad[0])
             raise InputError(
@@ -116,7 +120,7 @@ def check_covariance(name: str, x, *, definite: bool = True) -> None:
                 f"rad²) and that no standard deviation is zero."
             )
     else:
-        bad = np.flatnonzero(smallest < -1e-10)
+        bad = np.flatnonzero((smallest < -1e-10) & (raw < -1e-10 * scale))
         if bad.size:
             i = int(bad[0])
             raise InputError(
