@@ -42,6 +42,8 @@ __all__ = [
     "enu_site_offset",
     "enu_to_enu",
     "rotate",
+    "platform_to_enu_rotation",
+    "ecef_to_geodetic",
 ]
 
 WGS84_A = 6378137.0
@@ -333,3 +335,57 @@ def enu_to_enu(p_enu1, lat1, lon1, lat2, lon2, h1=0.0, h2=0.0) -> jnp.ndarray:
     """
     rot = enu_to_enu_rotation(lat1, lon1, lat2, lon2)
     return _add(rotate(rot, p_enu1), -enu_site_offset(lat1, lon1, lat2, lon2, h1, h2, frame=2))
+
+
+# --------------------------------------------------------------------------------------------
+# Added for the mobile-radar registration study (Wang, Chen, Jia, Progri 2012; specs/obem-registration.md)
+
+
+def platform_to_enu_rotation(yaw, pitch, roll) -> jnp.ndarray:
+    """Stabilised-platform frame to local ENU, ``T_p2ENU = T_Δφ T_Δη T_Δψ`` (Wang et al. 2012, eqs 2–5, 7).
+
+    The platform axes are nominally East, North, Up and differ from ENU by the attitude errors
+    (yaw Δφ, pitch Δη, roll Δψ), applied as roll about the platform y axis, then pitch about the
+    intermediate x axis, then yaw about the final z axis:
+
+    ``T_Δψ = [[cψ,0,−sψ],[0,1,0],[sψ,0,cψ]] = R_y(−ψ)``, ``T_Δη = R1(η)``, ``T_Δφ = R_z(φ)``
+
+    (yaw and roll follow the left-hand rule, pitch the right-hand rule). Δφ > 0 turns the
+    platform x axis clockwise (a target at compass azimuth θ is seen at θ − Δφ); Δη > 0 tilts the
+    platform North axis up; Δψ > 0 tilts the platform East axis up. The inverse
+    ``T_ENU2p`` is the transpose (eq. 6).
+
+    **Arguments:** ``yaw`` Δφ, ``pitch`` Δη, ``roll`` Δψ (rad), broadcast-compatible shapes ``(...)``.
+
+    **Returns:** ``(..., 3, 3)`` rotation with ``v_ENU = T @ v_platform``.
+    """
+    yaw, pitch, roll = _broadcast(yaw, pitch, roll)
+    return rotation_z(yaw) @ rotation_x(pitch) @ rotation_y(-roll)
+
+
+def ecef_to_geodetic(p_ecef, iterations: int = 6) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
+    """ECEF position to WGS-84 geodetic latitude, longitude and height (inverse of :func:`geodetic_to_ecef`).
+
+    Fixed-point iteration on the latitude, ``tan L = z / (p (1 − e² N/(N + h)))`` with
+    ``p = sqrt(x² + y²)``, started from the h = 0 solution ``tan L = z / (p (1 − e²))``. Each pass
+    shrinks the latitude error by about e² (≈ 7e-3), so the fixed count (default 6) reaches
+    float64 resolution anywhere near the Earth's surface and the function jits and
+    differentiates like any other. The height is ``p cos L + z sin L − r_ee sqrt(1 − e² sin²L)``,
+    which stays accurate at the poles (no division by cos L).
+
+    **Arguments:** ``p_ecef`` ``(..., 3)`` ECEF position (m); ``iterations``: latitude passes.
+
+    **Returns:** ``(lat, lon, h)``: geodetic latitude and longitude (rad), height above the
+    ellipsoid (m), each of shape ``(...)``.
+    """
+    p_ecef = jnp.asarray(p_ecef, dtype=jnp.result_type(p_ecef, float))
+    x, y, z = p_ecef[..., 0], p_ecef[..., 1], p_ecef[..., 2]
+    p = _safe_hypot(x, y)
+    lon = _safe_atan2(y, x)
+    lat = jnp.arctan2(z, p * (1.0 - WGS84_E2))
+    for _ in range(iterations):
+        n = prime_vertical_radius(lat)
+        h = p * jnp.cos(lat) + z * jnp.sin(lat) - WGS84_A * jnp.sqrt(1.0 - WGS84_E2 * jnp.sin(lat) ** 2)
+        lat = jnp.arctan2(z, p * (1.0 - WGS84_E2 * n / (n + h)))
+    h = p * jnp.cos(lat) + z * jnp.sin(lat) - WGS84_A * jnp.sqrt(1.0 - WGS84_E2 * jnp.sin(lat) ** 2)
+    return lat, lon, h

@@ -40,11 +40,11 @@ def printed_rtol(paper: float, last_digit: float, floor: float = 5e-3) -> float:
 
 
 def format_rows(rows: list[PaperRow], title: str) -> str:
-    head = f"{'id':<5} {'quantity':<58} {'paper':>11} {'jaxtrack':>12} {'rtol':>7}  ok"
+    head = f"{'id':<5} {'quantity':<72} {'paper':>11} {'jaxtrack':>12} {'rtol':>7}  ok"
     lines = [title, head, "-" * len(head)]
     for r in rows:
         lines.append(
-            f"{r.id:<5} {r.quantity[:58]:<58} {r.paper:>11.6g} {r.value:>12.6g} {r.rtol:>7.1e}  "
+            f"{r.id:<5} {r.quantity[:72]:<72} {r.paper:>11.6g} {r.value:>12.6g} {r.rtol:>7.1e}  "
             f"{'yes' if r.ok else 'NO'}"
         )
     passed = sum(r.ok for r in rows)

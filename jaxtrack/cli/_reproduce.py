@@ -15,6 +15,7 @@ STUDIES = {
     "ho": ("jaxtrack.applications.ho_sensitivity", "Ho 1968, Kalman filter sensitivity (specs/ho-sensitivity.md)"),
     "bias": ("jaxtrack.applications.radar_bias", "Radar bias: absolute from relative bias, reduced-state filter (specs/radar-bias.md)"),
     "sar": ("jaxtrack.applications.sar_navigation", "Layne & Blasch 1997, SAR + INS targeting (specs/sar-navigation.md)"),
+    "registration": ("jaxtrack.applications.obem_registration", "Mobile radar registration, AAM vs OBEM (specs/obem-registration.md)"),
 }
 
 
