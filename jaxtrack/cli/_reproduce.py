@@ -16,6 +16,7 @@ STUDIES = {
     "bias": ("jaxtrack.applications.radar_bias", "Radar bias: absolute from relative bias, reduced-state filter (specs/radar-bias.md)"),
     "sar": ("jaxtrack.applications.sar_navigation", "Layne & Blasch 1997, SAR + INS targeting (specs/sar-navigation.md)"),
     "registration": ("jaxtrack.applications.obem_registration", "Mobile radar registration, AAM vs OBEM (specs/obem-registration.md)"),
+    "tma": ("jaxtrack.applications.bearings_tma", "Lindgren & Gong 1977, bearings-only TMA (specs/bearings-tma.md)"),
 }
 
 
