@@ -9,6 +9,10 @@ from ._base import (
     filter_step as filter_step,
     run_filter as run_filter,
 )
+from ._batch import (
+    BatchFilterResult as BatchFilterResult,
+    run_filter_batch as run_filter_batch,
+)
 from ._kalman import ExtendedKalmanFilter as ExtendedKalmanFilter, KalmanFilter as KalmanFilter
 from ._smoother import SmootherResult as SmootherResult, rts_smoother as rts_smoother
 from ._unscented import UnscentedKalmanFilter as UnscentedKalmanFilter

@@ -16,15 +16,15 @@ from typing import Literal, NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._validation import InputError, check_shape, is_concrete
 from ..models import AbstractStateSpaceModel
+from ._linalg import cholesky_and_inverse, matmul, tril_inverse
 
 FirstStep = Literal["update", "predict"]
-Save = Literal["all", "final"]
+Save = Literal["all", "final", "mean"]
 
 
 def symmetrize(a: Array) -> Array:
@@ -54,9 +54,15 @@ def masked_noise(R: Array, observed: Bool[Array, " m"]) -> Array:
     return jnp.where(both, R, 0.0) + jnp.diag(jnp.where(observed, 0.0, 1.0).astype(R.dtype))
 
 
-def gaussian_log_likelihood(innovation, innovation_cov_chol, num_observed) -> Array:
-    """``log N(y; 0, S)`` over ``num_observed`` components, given ``chol(S)`` (lower)."""
-    whitened = jsl.solve_triangular(innovation_cov_chol, innovation, lower=True)
+def gaussian_log_likelihood(innovation, innovation_cov_chol, num_observed, chol_inv=None) -> Array:
+    """``log N(y; 0, S)`` over ``num_observed`` components, given ``L = chol(S)`` (lower).
+
+    With ``chol_inv = L⁻¹`` the innovation is whitened by a product rather than a triangular
+    solve, which stays unbatched on the factor side under ``vmap`` (see ``_linalg``).
+    """
+    if chol_inv is None:
+        chol_inv = tril_inverse(innovation_cov_chol)
+    whitened = matmul(chol_inv, innovation)
     log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(innovation_cov_chol)))
     return -0.5 * (whitened @ whitened + log_det + num_observed * math.log(2.0 * math.pi))
 
@@ -84,21 +90,28 @@ def condition_linearized(
     H = H * obs_f[:, None]
     R = masked_noise(R, observed)
     innovation = jnp.where(observed, innovation, 0.0)
-    PHt = cov @ H.T
-    S = symmetrize(H @ PHt + R)
-    chol = jnp.linalg.cholesky(S)
+    # Small products go through `matmul` (element-wise loops under vmap, see `_linalg`).
+    PHt = matmul(cov, H.T)
+    S = symmetrize(matmul(H, PHt) + R)
+    chol, chol_inv = cholesky_and_inverse(S)
     if gain is None:
-        # W = P Hᵀ S⁻¹, computed as the transpose of S⁻¹ (H P) with S's Cholesky factor.
-        gain = jsl.cho_solve((chol, True), PHt.T).T
+        # W = P Hᵀ S⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹ with S = L Lᵀ. Products with L⁻¹ rather than a
+        # triangular solve: for small m the factor is written out (no LAPACK call per run
+        # under vmap), and a factor shared by a batch stays unbatched.
+        gain = matmul(matmul(PHt, chol_inv.T), chol_inv)
     else:
         gain = gain * obs_f[None, :]
-    A = jnp.eye(cov.shape[0], dtype=cov.dtype) - gain @ H
-    new_cov = A @ cov @ A.T + gain @ R @ gain.T
-    # The two triple products round differently; keep P exactly symmetric so that Cholesky
-    # factorisations downstream (next S, smoother, NEES) see a symmetric matrix.
+    # Joseph form evaluated through the rank-m structure of I − W H (P is symmetric, so
+    # H P = (P Hᵀ)ᵀ): (I − W H) P = P − W (P Hᵀ)ᵀ, and (I − W H) P (I − W H)ᵀ = A P − (A P Hᵀ) Wᵀ
+    # with A P = (I − W H) P. The same recursion as forming I − W H and two n×n×n products,
+    # in about 4n²m multiply-adds instead of 2n³.
+    AP = cov - matmul(gain, PHt.T)
+    new_cov = AP - matmul(matmul(AP, H.T), gain.T) + matmul(matmul(gain, R), gain.T)
+    # The terms round differently; keep P exactly symmetric so that Cholesky factorisations
+    # downstream (next S, smoother, NEES) see a symmetric matrix.
     new_cov = symmetrize(new_cov)
-    new_mean = mean + gain @ innovation
-    ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f))
+    new_mean = mean + matmul(gain, innovation)
+    ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f), chol_inv)
     return Conditioned(new_mean, new_cov, innovation, S, ll, gain)
 
 
@@ -121,11 +134,12 @@ def condition_on_moments(
     S = symmetrize(S)
     C = cross_cov * obs_f[None, :]
     innovation = jnp.where(observed, innovation, 0.0)
-    chol = jnp.linalg.cholesky(S)
-    gain = jsl.cho_solve((chol, True), C.T).T
-    new_cov = symmetrize(cov - gain @ S @ gain.T)  # symmetric in exact arithmetic; see above
-    new_mean = mean + gain @ innovation
-    ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f))
+    chol, chol_inv = cholesky_and_inverse(S)
+    gain = matmul(matmul(C, chol_inv.T), chol_inv)
+    # Symmetric in exact arithmetic; see condition_linearized.
+    new_cov = symmetrize(cov - matmul(matmul(gain, S), gain.T))
+    new_mean = mean + matmul(gain, innovation)
+    ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f), chol_inv)
     return Conditioned(new_mean, new_cov, innovation, S, ll, gain)
 
 
@@ -162,7 +176,8 @@ class FilterResult(eqx.Module):
     """Output of :func:`run_filter` for one trajectory of ``T`` steps.
 
     With ``save="final"`` the per-step histories are ``None`` and only the final state, the
-    log-likelihood and the status are kept (memory independent of ``T``).
+    log-likelihood and the status are kept (memory independent of ``T``); with ``save="mean"``
+    ``filtered_mean`` is kept as well.
 
     **Fields** (``n`` states, ``m`` measurement components):
 
@@ -240,6 +255,8 @@ def _scan_filter(filter, model, measurements, observed, first_step, save):
         carry, (pm, pc, post) = filter_step(filter, model, first_step, carry, k, z, obs)
         if save == "final":
             return carry, None
+        if save == "mean":
+            return carry, post.mean
         return carry, (
             post.mean,
             post.cov,
@@ -254,6 +271,8 @@ def _scan_filter(filter, model, measurements, observed, first_step, save):
     final, hist = jax.lax.scan(step, init, (ks, measurements, observed))
     if save == "final":
         hist = (None,) * 7
+    elif save == "mean":
+        hist = (hist,) + (None,) * 6
     return FilterResult(*hist, final.log_likelihood, final.mean, final.cov, final.ok)
 
 
@@ -353,7 +372,8 @@ def run_filter(
       measurement, so step 0 is an update only (Ho 1968, dynamax); ``"predict"`` — the prior is one
       transition before the first measurement (FilterPy's ``predict(); update(z)``).
     - ``save``: ``"all"`` keeps per-step histories; ``"final"`` keeps only the log-likelihood and
-      the final state (memory independent of ``T``).
+      the final state (memory independent of ``T``); ``"mean"`` keeps the filtered means
+      ``(T, n)`` besides those (the other histories are ``None``).
     - ``nan_as_missing``: treat NaN measurements as missing. Off by default: a NaN where the mask
       says observed raises ``InputError`` (or, under tracing, makes ``ok`` False).
     - ``throw``: raise at run time if the result is non-finite. Use ``throw=False`` inside
@@ -373,8 +393,8 @@ def run_filter(
     """
     if first_step not in ("update", "predict"):
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
-    if save not in ("all", "final"):
-        raise InputError(f"`save` must be 'all' or 'final'; got {save!r}.")
+    if save not in ("all", "final", "mean"):
+        raise InputError(f"`save` must be 'all', 'final' or 'mean'; got {save!r}.")
     if not isinstance(filter, AbstractFilter):
         raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
     if not isinstance(model, AbstractStateSpaceModel):

@@ -9,11 +9,12 @@ from jaxtyping import Array, ArrayLike, Float
 from .._validation import InputError, check_finite, check_shape
 from ..models import LinearGaussianModel, at_step
 from ._base import AbstractFilter, condition_linearized
+from ._linalg import matmul
 
 
 def _predict_linearized(model, mean, cov, k, jacobian):
     Q = model.process_noise_cov(k)
-    return model.transition(mean, k), jacobian @ cov @ jacobian.T + Q
+    return model.transition(mean, k), matmul(matmul(jacobian, cov), jacobian.T) + Q
 
 
 class KalmanFilter(AbstractFilter):
@@ -66,7 +67,7 @@ class KalmanFilter(AbstractFilter):
         H = model.measurement_matrix(k)
         gain = None if self.gain is None else at_step(self.gain, k, 2)
         return condition_linearized(
-            mean, cov, z - H @ mean, H, model.measurement_noise_cov(k), observed, gain
+            mean, cov, z - matmul(H, mean), H, model.measurement_noise_cov(k), observed, gain
         )
 
 

@@ -3,22 +3,24 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 import numpy as np
 import scipy.stats
 from jaxtyping import Array, ArrayLike
 
 from .._validation import InputError
+from ..filters._linalg import cholesky_and_inverse, matmul
 
 
 def normalized_squared_error(error: Array, cov: Array) -> Array:
     """``eᵀ P⁻¹ e`` for one error vector ``(d,)`` and covariance ``(d, d)`` (NEES or NIS).
 
-    Uses the Cholesky factor of ``cov``; missing measurement components must already be
+    Uses the Cholesky factor ``L`` of ``cov``; missing measurement components must already be
     decoupled (identity rows/columns, zero error), as in :class:`~jaxtrack.filters.FilterResult`.
+    The error is whitened by a product with ``L⁻¹``, not a triangular solve, so that under
+    ``jax.vmap`` with a covariance shared by the batch only the product is batched.
     """
-    chol = jnp.linalg.cholesky(cov)
-    whitened = jsl.solve_triangular(chol, error, lower=True)
+    _, chol_inv = cholesky_and_inverse(cov)
+    whitened = matmul(chol_inv, error)
     return whitened @ whitened
 
 

@@ -11,6 +11,8 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._validation import InputError
 from ..filters._base import FirstStep
+from ..filters._linalg import matmul
+from ._noise import key_words, step_normals
 from ..models import AbstractStateSpaceModel, at_step
 
 
@@ -60,20 +62,47 @@ def step_keys(key: PRNGKeyArray) -> tuple[PRNGKeyArray, PRNGKeyArray]:
 def draw_initial_state(model, factors: NoiseFactors, prior_key) -> Array:
     n = model.state_dim
     eps = jax.random.normal(prior_key, (n,), model.initial_mean.dtype)
-    return model.initial_mean + factors.prior @ eps
+    return model.initial_mean + matmul(factors.prior, eps)
 
 
 def simulate_step(model, factors: NoiseFactors, first_step: FirstStep, x_prev, steps_key, k):
-    """Draw ``x_k`` from ``x_{k-1}`` and then ``z_k``; step ``k``'s draws use ``fold_in(key, k)``."""
-    dtype = model.initial_mean.dtype
-    kw, kv = jax.random.split(jax.random.fold_in(steps_key, k))
-    w = at_step(factors.process, k, 2) @ jax.random.normal(kw, (model.state_dim,), dtype)
-    x = model.transition(x_prev, k) + w
+    """Draw ``x_k`` from ``x_{k-1}`` and then ``z_k``.
+
+    Step ``k``'s ``n + m`` standard normal numbers come from the run's ``steps_key`` and the
+    step index alone (see :func:`step_noise`): the plant noise uses the first ``n``, the
+    measurement noise the last ``m``.
+    """
+    eps = step_noise(steps_key, k, model.state_dim + model.meas_dim, model.initial_mean.dtype)
+    return advance(model, factors, first_step, x_prev, eps, k)
+
+
+def step_noise(steps_key: PRNGKeyArray, k, num: int, dtype) -> Array:
+    """Step ``k``'s ``num`` standard normal numbers for a run with per-step key ``steps_key``.
+
+    One Threefry-2x32 evaluation per number, counter ``(k, j)`` (see :mod:`._noise`): the same
+    numbers whether a run is simulated alone or in a batch of any size.
+    """
+    return step_normals(key_words(steps_key), k, num, dtype)
+
+
+def advance(model, factors: NoiseFactors, first_step: FirstStep, x_prev, eps, k):
+    """``x_k = f_k(x_{k-1}) + L_Q ε_w``, ``z_k = h_k(x_k) + L_R ε_v`` given ``eps = (ε_w, ε_v)``.
+
+    ``x_prev`` ``(n, *B)`` and ``eps`` ``(n + m, *B)`` may carry a trailing batch axis (the
+    model's functions are then mapped over it). The noise products use ``matmul``, which sums in
+    the same order with or without the batch axis, so a run replayed alone by :func:`simulate`
+    reproduces the Monte Carlo harness's run exactly.
+    """
+    n = model.state_dim
+    transition, measurement = model.transition, model.measurement
+    if x_prev.ndim == 2:
+        transition = jax.vmap(transition, in_axes=(1, None), out_axes=1)
+        measurement = jax.vmap(measurement, in_axes=(1, None), out_axes=1)
+    x = transition(x_prev, k) + matmul(at_step(factors.process, k, 2), eps[:n])
     if first_step == "update":
         # The prior is on x_0 itself: no transition into step 0.
         x = jnp.where(k == 0, x_prev, x)
-    v = at_step(factors.measurement, k, 2) @ jax.random.normal(kv, (model.meas_dim,), dtype)
-    return x, model.measurement(x, k) + v
+    return x, measurement(x, k) + matmul(at_step(factors.measurement, k, 2), eps[n:])
 
 
 @eqx.filter_jit
@@ -82,11 +111,19 @@ def _simulate_jit(model, key, num_steps, first_step):
     prior_key, steps_key = step_keys(key)
     x0 = draw_initial_state(model, factors, prior_key)
 
-    def step(x_prev, k):
-        x, z = simulate_step(model, factors, first_step, x_prev, steps_key, k)
-        return x, (x, z)
+    num = model.state_dim + model.meas_dim
+    dtype = model.initial_mean.dtype
 
-    _, (xs, zs) = jax.lax.scan(step, x0, jnp.arange(num_steps))
+    def step(carry, k):
+        # Step k's draws were made in step k−1 (see montecarlo._run._simulated_block): the
+        # carried value is computed once instead of inside every consumer. Same numbers as
+        # simulate_step.
+        x_prev, eps = carry
+        x, z = advance(model, factors, first_step, x_prev, eps, k)
+        return (x, step_noise(steps_key, k + 1, num, dtype)), (x, z)
+
+    init = (x0, step_noise(steps_key, 0, num, dtype))
+    _, (xs, zs) = jax.lax.scan(step, init, jnp.arange(num_steps))
     return Trajectory(xs, zs)
 
 
@@ -103,9 +140,11 @@ def simulate(
     ``first_step="update"`` that draw *is* ``x_0``, with ``"predict"`` it is ``x_{-1}`` and
     ``x_0 = f_0(x_{-1}) + w_0`` (the same conventions as :func:`jaxtrack.filters.run_filter`).
 
-    Step ``k``'s noise comes from ``jax.random.fold_in(key_steps, k)``, so a trajectory does not
-    depend on how many steps are simulated after it, and the Monte Carlo harness reproduces it
-    exactly for the same run key.
+    The run's key is split once into a prior key and a per-step key; step ``k``'s noise is a
+    function of the per-step key and ``k`` only (one Threefry-2x32 hash per number, with
+    ``jax.random.normal``'s transform; see :func:`step_noise`), so a trajectory does not depend on
+    how many steps are simulated after it, and the Monte Carlo harness reproduces it exactly for
+    the same run key. Keys must use JAX's default Threefry implementation.
 
     **Arguments:** ``model``; ``key``, a PRNG key; ``num_steps`` ``T`` (defaults to the model's
     per-step length); ``first_step`` as in ``run_filter``.

@@ -1,0 +1,102 @@
+"""Small dense linear algebra that batches well: Cholesky factors and their inverses.
+
+Why this module exists: under ``jax.vmap`` on a CPU, ``jnp.linalg.cholesky`` and
+``solve_triangular`` become one LAPACK call per batch element, and each call costs far more
+than the arithmetic of a 2×2 or 3×3 factorisation. For the measurement sizes trackers use
+(``m ≤ 4``) the factorisation is written out entry by entry, so that a batch of runs is a few
+fused element-wise loops. For larger sizes LAPACK is used, as before.
+
+A second rule keeps batched filters cheap whatever the size: the factor ``L`` and its inverse
+depend only on the covariance, and everything that touches data (whitening an innovation, the
+gain) is a matrix product with ``L⁻¹``. When the covariance is shared by every run of a batch
+(a linear model with one measurement schedule), ``jax.vmap`` then leaves the factorisation
+unbatched and only the products are batched.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+from jaxtyping import Array, Float
+
+# Largest size factorised entry by entry. The unrolled code has O(d³) operations in the trace,
+# so it stays small; beyond this LAPACK is at least as fast.
+UNROLL_MAX = 4
+
+
+# Largest contraction length of a product written out as a sum of broadcast products.
+MATMUL_UNROLL_MAX = 16
+
+
+def matmul(a: Array, b: Array) -> Array:
+    """``a @ b`` for matrices and vectors (ndim ≤ 2), written as ``Σ_k a[:, k] b[k, :]``.
+
+    Under ``jax.vmap`` a product of two small batched matrices is a batched ``dot_general``,
+    which XLA's CPU backend runs as one tiny kernel call per batch element; the sum of
+    broadcast products is instead an element-wise loop over the whole batch that fuses with
+    its neighbours. Long contractions (``k > MATMUL_UNROLL_MAX``) use ``@``.
+    """
+    k = a.shape[-1]
+    if a.ndim > 2 or b.ndim > 2 or k > MATMUL_UNROLL_MAX or b.shape[0] != k:
+        return a @ b
+    if a.ndim == 1:
+        col = lambda i: a[i]  # noqa: E731
+    else:
+        col = lambda i: a[:, i] if b.ndim == 1 else a[:, i, None]  # noqa: E731
+    row = lambda i: b[i] if a.ndim == 1 or b.ndim == 1 else b[None, i]  # noqa: E731
+    out = col(0) * row(0)
+    for i in range(1, k):
+        out = out + col(i) * row(i)
+    return out
+
+
+def cholesky(a: Float[Array, "d d"]) -> Float[Array, "d d"]:
+    """Lower Cholesky factor ``L`` (``L Lᵀ = a``) of a symmetric positive definite ``a``.
+
+    Reads the lower triangle only. Not positive definite → NaN entries (as LAPACK's ``potrf``
+    through ``jnp.linalg.cholesky``), which the filters turn into ``ok = False``.
+    """
+    d = a.shape[-1]
+    if d > UNROLL_MAX:
+        return jnp.linalg.cholesky(a)
+    # Cholesky–Banachiewicz, row by row; the same operations and rounding as LAPACK's
+    # unblocked algorithm up to the order of the sums.
+    L = [[None] * d for _ in range(d)]
+    for i in range(d):
+        for j in range(i + 1):
+            s = a[..., i, j]
+            for k in range(j):
+                s = s - L[i][k] * L[j][k]
+            L[i][j] = jnp.sqrt(s) if i == j else s / L[j][j]
+    zero = jnp.zeros_like(a[..., 0, 0])
+    return jnp.stack(
+        [jnp.stack([L[i][j] if j <= i else zero for j in range(d)], axis=-1) for i in range(d)],
+        axis=-2,
+    )
+
+
+def tril_inverse(L: Float[Array, "d d"]) -> Float[Array, "d d"]:
+    """``L⁻¹`` of a lower-triangular ``L`` with non-zero diagonal (forward substitution)."""
+    d = L.shape[-1]
+    if d > UNROLL_MAX:
+        return jsl.solve_triangular(L, jnp.eye(d, dtype=L.dtype), lower=True)
+    X = [[None] * d for _ in range(d)]
+    for i in range(d):
+        inv_diag = 1.0 / L[..., i, i]
+        X[i][i] = inv_diag
+        for j in range(i):
+            s = L[..., i, j] * X[j][j]
+            for k in range(j + 1, i):
+                s = s + L[..., i, k] * X[k][j]
+            X[i][j] = -s * inv_diag
+    zero = jnp.zeros_like(L[..., 0, 0])
+    return jnp.stack(
+        [jnp.stack([X[i][j] if j <= i else zero for j in range(d)], axis=-1) for i in range(d)],
+        axis=-2,
+    )
+
+
+def cholesky_and_inverse(a: Float[Array, "d d"]) -> tuple[Float[Array, "d d"], Float[Array, "d d"]]:
+    """``(L, L⁻¹)`` for a symmetric positive definite ``a``."""
+    L = cholesky(a)
+    return L, tril_inverse(L)
