@@ -43,8 +43,12 @@ def filter_rmse(model, num_steps: int, components) -> np.ndarray:
 
 
 def run_demo(num_runs: int = 10_000, num_steps: int = 100, seed: int = 0, out_dir: str | Path = "results/demo",
-             chunk_size: int = 2_000, progress: bool = True) -> dict:
-    """Run the demo, write ``demo.png`` and ``demo.json`` into ``out_dir``, return the table rows."""
+             chunk_size: int = 2_000, progress: bool = True, mesh=None, write: bool = True) -> dict:
+    """Run the demo, write ``demo.png`` and ``demo.json`` into ``out_dir``, return the table rows.
+
+    ``mesh``: share the runs over a device mesh (see :func:`jaxtrack.montecarlo.run_mesh`; the
+    numbers are those of one device). ``write=False`` skips the files (processes other than 0).
+    """
     from ..plotting import plot_monte_carlo
 
     truth, filters = demo_models()
@@ -53,7 +57,7 @@ def run_demo(num_runs: int = 10_000, num_steps: int = 100, seed: int = 0, out_di
     for label, model in filters.items():
         t0 = time.perf_counter()
         res = monte_carlo(truth, key, num_runs, num_steps=num_steps, filter_model=model,
-                          chunk_size=chunk_size, progress=progress)
+                          chunk_size=chunk_size, progress=progress, mesh=mesh)
         elapsed = time.perf_counter() - t0
         results[label] = res
         pos = filter_rmse(model, num_steps, (0, 1))
@@ -77,6 +81,8 @@ def run_demo(num_runs: int = 10_000, num_steps: int = 100, seed: int = 0, out_di
             "seconds": elapsed,
         })
     out = Path(out_dir)
+    if not write:
+        return {"rows": rows, "figure": None, "table": None}
     out.mkdir(parents=True, exist_ok=True)
     fig = plot_monte_carlo(
         results,

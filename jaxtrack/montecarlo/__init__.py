@@ -1,10 +1,16 @@
-"""Monte Carlo: simulate truth and measurements, vmap over run keys, streaming consistency metrics."""
+"""Monte Carlo: simulate truth and measurements, blocks of runs, streaming consistency metrics,
+on one device or sharded over devices and hosts."""
 
 from ._metrics import (
     chi2_mean_bounds as chi2_mean_bounds,
     normalized_squared_error as normalized_squared_error,
 )
-from ._run import MonteCarloResult as MonteCarloResult, monte_carlo as monte_carlo
+from ._run import (
+    MonteCarloResult as MonteCarloResult,
+    monte_carlo as monte_carlo,
+    monte_carlo_sweep as monte_carlo_sweep,
+)
+from ._sharding import run_mesh as run_mesh, sweep_mesh as sweep_mesh
 from ._simulate import (
     Trajectory as Trajectory,
     psd_sqrt as psd_sqrt,

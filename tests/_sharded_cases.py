@@ -1,0 +1,33 @@
+"""The Monte Carlo cases that ``test_sharding.py`` runs on one device and on many (shared by the
+test and its worker processes)."""
+
+import jax.numpy as jnp
+
+from jaxtrack.filters import ExtendedKalmanFilter
+from jaxtrack.models import constant_velocity
+
+# Not multiples of the block sizes (2048 shared, 512 per run) or of the device counts: the last
+# round has partial and empty blocks.
+NUM_RUNS = 5000
+SWEEP_RUNS = 1500
+NUM_STEPS = 25
+SWEEP_VALUES = (0.1, 0.5, 2.0)  # acceleration PSD of the truth (m²/s³); the filter assumes 0.5
+FIELDS = ("mse", "mean_error", "nees", "nees_std", "nis")
+
+
+def cv(accel_psd=0.5):
+    prior = jnp.diag(jnp.asarray([100.0, 100.0, 10.0, 10.0]) ** 2)
+    return constant_velocity(1.0, dim=2, accel_psd=accel_psd, measurement_std=10.0, initial_cov=prior)
+
+
+def cases():
+    """Shared-covariance path (KF, mismatched Q, a gap in the measurements) and per-run path (EKF)."""
+    mask = jnp.ones(NUM_STEPS, bool).at[10:13].set(False)
+    return {
+        "kf": {"truth": cv(2.0), "filter_model": cv(0.5), "mask": mask},
+        "ekf": {"truth": cv(0.5), "filter": ExtendedKalmanFilter()},
+    }
+
+
+def sweep_models(q):
+    return cv(q), cv(0.5)
