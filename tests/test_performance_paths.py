@@ -28,6 +28,7 @@ from jaxtrack.filters import (
     run_filter,
     run_filter_batch,
 )
+from jaxtrack.filters import _batch as batch_mod
 from jaxtrack.filters._linalg import cholesky, matmul, tril_inverse
 from jaxtrack.models import LinearGaussianModel, constant_velocity
 from jaxtrack.montecarlo import monte_carlo, simulate
@@ -92,14 +93,22 @@ def test_shared_and_per_run_paths_agree(first_step, mask_kind):
 
 
 @pytest.mark.parametrize("first_step", FIRST_STEPS)
-def test_shared_path_matches_run_filter_run_by_run(first_step):
-    """Time-varying F, Q, H, R and a known input: run i of the batch is run_filter on run i."""
+@pytest.mark.parametrize("num_steps", [T, 29])
+def test_shared_path_matches_run_filter_run_by_run(first_step, num_steps):
+    """Time-varying F, Q, H, R and a known input: run i of the batch is run_filter on run i.
+
+    29 steps is prime: the blocked mean pass then ends with a shorter block. Masked entries
+    hold NaN, which must not reach the block products.
+    """
     rng = np.random.default_rng(2)
-    model = time_varying_model(rng)
-    zs = batch_of(model, num_runs=6)
-    mask = rng.random((T, 2)) < 0.85
+    model = time_varying_model(rng, num_steps)
+    zs = batch_of(model, num_runs=6, num_steps=num_steps)
+    mask = rng.random((num_steps, 2)) < 0.85
+    assert batch_mod._block_length(2, num_steps) == (6 if num_steps == T else 8)
+    zs = jnp.where(mask[None], zs, jnp.nan)
     res = run_filter_batch(KalmanFilter(), model, zs, mask=mask, first_step=first_step)
-    assert res.shared_covariance
+    assert res.shared_covariance and bool(jnp.all(res.ok))
+    zs = jnp.where(mask[None], zs, 0.0)
     for i in range(zs.shape[0]):
         one = run_filter(KalmanFilter(), model, zs[i], mask=mask, first_step=first_step)
         run_i = res.run(i)

@@ -100,3 +100,20 @@ def cholesky_and_inverse(a: Float[Array, "d d"]) -> tuple[Float[Array, "d d"], F
     """``(L, L⁻¹)`` for a symmetric positive definite ``a``."""
     L = cholesky(a)
     return L, tril_inverse(L)
+
+
+def sum_rows(a: Array) -> Array:
+    """``a.sum(axis=0)`` over a few rows, as adds: on CPU a reduction over a short leading axis
+    is a separate, slow kernel, while adds fuse with the rest of the step."""
+    out = a[0]
+    for i in range(1, a.shape[0]):
+        out = out + a[i]
+    return out
+
+
+def all_rows(a: Array) -> Array:
+    """``a.all(axis=0)`` over a few rows, as ``&`` (see :func:`sum_rows`)."""
+    out = a[0]
+    for i in range(1, a.shape[0]):
+        out = out & a[i]
+    return out

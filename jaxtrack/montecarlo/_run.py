@@ -38,13 +38,11 @@ from ..filters import AbstractFilter, KalmanFilter, filter_step
 from ..filters._base import FirstStep, _Carry
 from ..filters._batch import (
     CovarianceMode,
-    _all_rows,
     _mean_maps,
-    _sum_rows,
     shared_covariance_applies,
     shared_covariances,
 )
-from ..filters._linalg import cholesky_and_inverse, matmul
+from ..filters._linalg import all_rows, cholesky_and_inverse, matmul, sum_rows
 from ..models import AbstractStateSpaceModel, at_step
 from ._metrics import chi2_mean_bounds, normalized_squared_error
 from ._noise import key_words, step_normals
@@ -251,9 +249,9 @@ def _shared_block(truth, factors, filter_model, cov, maps, nees_factor, observed
         error = x - post
         w_e = matmul(p_inv, error)
         w_y = matmul(s_inv, innovation)
-        nees = _sum_rows(w_e * w_e)
-        nis = _sum_rows(w_y * w_y)
-        ok = ok & _all_rows(jnp.isfinite(error)) & jnp.isfinite(nees) & jnp.isfinite(nis)
+        nees = sum_rows(w_e * w_e)
+        nis = sum_rows(w_y * w_y)
+        ok = ok & all_rows(jnp.isfinite(error)) & jnp.isfinite(nees) & jnp.isfinite(nis)
         return (x, eps, post, ok), _masked_sums(use, error, nees, nis, axis=-1)
 
     ks = jnp.arange(observed.shape[0])
