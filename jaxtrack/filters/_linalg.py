@@ -24,8 +24,9 @@ from jaxtyping import Array, Float
 UNROLL_MAX = 4
 
 
-# Largest contraction length of a product written out as a sum of broadcast products.
-MATMUL_UNROLL_MAX = 16
+# Largest contraction length of a product written out as a sum of broadcast products. Measured
+# on the per-run path: written out is 35% faster at 6 states, `@` 20% faster at 9.
+MATMUL_UNROLL_MAX = 8
 
 
 def matmul(a: Array, b: Array) -> Array:
