@@ -128,7 +128,8 @@ def test_van_loan_scalar_vmap_and_jit_agree():
 
 
 def test_singer_matches_closed_form_phi_and_quadrature_q():
-    """Singer Φ equals its closed form, Q a 60-node Gauss–Legendre ∫ΦQcΦᵀ, both to rtol 1e-10 (zeros to 1e-14 of the largest entry)."""
+    """Singer Φ equals its closed form, Q a 60-node Gauss–Legendre ∫ΦQcΦᵀ, both to rtol 1e-10
+    (entries that are 0 in closed form to 1e-14 of the largest entry)."""
     theta, sigma = 4.0, 3.0
     taus = np.array([0.05, 0.5, 2.0, 10.0])
     model = singer(

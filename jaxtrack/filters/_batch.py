@@ -39,7 +39,7 @@ from ._base import (
     filter_step,
 )
 from ._kalman import KalmanFilter
-from ._linalg import cholesky_and_inverse
+from ._linalg import cholesky_and_inverse, matmul
 
 CovarianceMode = Literal["auto", "shared", "per_run"]
 
@@ -184,6 +184,20 @@ def _mean_maps(model: LinearGaussianModel, gain, num_steps, first_step) -> _Mean
     return jax.vmap(at)(jnp.arange(num_steps))
 
 
+def mean_step(mp: _MeanMaps, gain, x, z, observed):
+    """One step of the mean recursion with shared gains (:class:`_MeanMaps` at step ``k``).
+
+    ``x`` is ``(n,)`` or ``(n, B)`` (runs as the trailing axis), ``z`` ``(m,)`` or ``(m, B)``,
+    ``observed`` ``(m,)``. Missing components of ``z`` are zeroed (they may hold NaN) and their
+    innovations are 0. Returns ``(x⁺, y)``: ``x⁺ = A x + W z + c``, ``y = z − (HΦ) x − Hb``.
+    """
+    col = (lambda v: v) if x.ndim == 1 else (lambda v: v[:, None])  # noqa: E731
+    z = jnp.where(col(observed), z, 0.0)
+    post = matmul(mp.update, x) + matmul(gain, z) + col(mp.update_offset)
+    innovation = z - matmul(mp.innovation_map, x) - col(mp.innovation_offset)
+    return post, jnp.where(col(observed), innovation, 0.0)
+
+
 # Inputs per block of the blocked mean pass: about 16 measurement components, so that a block
 # is a GEMM of a few tens of columns (measured best on 2-D and 3-D position measurements).
 _BLOCK_INPUTS = 16
@@ -216,18 +230,16 @@ def _block_outputs(save, x, z, steps):
     per-step maps (leading ``L``). Returns the concatenated outputs ``(d,)``:
     ``[x at the block's end (n)]`` for ``save="final"``, ``[filtered (L·n)]`` for ``"mean"``,
     ``[filtered, predicted (L·n), innovation (L·m)]`` for ``"all"``, then always the whitened
-    innovations ``L⁻¹ y`` ``(L·m)`` for the log-likelihood. See :class:`_MeanMaps` for the step.
+    innovations ``L⁻¹ y`` ``(L·m)`` for the log-likelihood. Each step is :func:`mean_step`.
     """
     maps, gain, chol_inv, observed = steps
     filtered, predicted, innovations, whitened = [], [], [], []
     for j in range(z.shape[0]):
         mp = jax.tree_util.tree_map(lambda a: a[j], maps)
-        z_j = jnp.where(observed[j], z[j], 0.0)
-        y = jnp.where(observed[j], z_j - mp.innovation_map @ x - mp.innovation_offset, 0.0)
         predicted.append(mp.transition @ x + mp.offset)
+        x, y = mean_step(mp, gain[j], x, z[j], observed[j])
         innovations.append(y)
         whitened.append(chol_inv[j] @ y)
-        x = mp.update @ x + gain[j] @ z_j + mp.update_offset
         filtered.append(x)
     head = {"final": [x], "mean": filtered, "all": filtered + predicted + innovations}[save]
     return jnp.concatenate(head + whitened)

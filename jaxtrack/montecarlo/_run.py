@@ -39,6 +39,7 @@ from ..filters._base import FirstStep, _Carry
 from ..filters._batch import (
     CovarianceMode,
     _mean_maps,
+    mean_step,
     shared_covariance_applies,
     shared_covariances,
 )
@@ -242,10 +243,7 @@ def _shared_block(truth, factors, filter_model, cov, maps, nees_factor, observed
         x_prev, eps, est, ok = carry
         k, obs, gain, s_inv, p_inv, mp = inputs
         x, z, eps = truth_step(x_prev, eps, k)
-        z = jnp.where(obs[:, None], z, 0.0)
-        post = matmul(mp.update, est) + matmul(gain, z) + mp.update_offset[:, None]
-        innovation = z - matmul(mp.innovation_map, est) - mp.innovation_offset[:, None]
-        innovation = jnp.where(obs[:, None], innovation, 0.0)
+        post, innovation = mean_step(mp, gain, est, z, obs)
         error = x - post
         w_e = matmul(p_inv, error)
         w_y = matmul(s_inv, innovation)
