@@ -27,10 +27,10 @@ demo: $(STAMP)
 	$(BIN)/jaxtrack demo --out results/demo
 
 test: $(STAMP)
-	$(BIN)/python -m pytest $(PYTEST_ARGS)
+	$(BIN)/pytest $(PYTEST_ARGS)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest --runslow $(PYTEST_ARGS)
+	$(BIN)/pytest --runslow $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) results .pytest_cache
