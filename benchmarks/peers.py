@@ -386,15 +386,16 @@ def bench_ekf(num_runs, num_steps, repeats, fp_runs) -> dict:
             "max_abs_mean_difference": agree, "steps_per_s": {k: total / t for k, t in times.items()}}
 
 
-def bench_monte_carlo(num_runs, num_steps, repeats) -> dict:
+def dynamax_monte_carlo_job(model, num_runs, num_steps):
+    """The full Monte Carlo job as a dynamax user writes it: ``vmap`` of ``LinearGaussianSSM.sample``
+    and ``lgssm_filter``, RMSE, mean error and NEES in ``jnp``. Returns ``job(key)``."""
     from dynamax.linear_gaussian_ssm import LinearGaussianSSM, lgssm_filter
 
-    model = linear_model(4)
     params = dynamax_params(model)
     ssm = LinearGaussianSSM(model.state_dim, model.meas_dim)
 
     @jax.jit
-    def dynamax_job(key):
+    def job(key):
         def one(k):
             states, ys = ssm.sample(params, k, num_steps)
             post = lgssm_filter(params, ys)
@@ -404,6 +405,13 @@ def bench_monte_carlo(num_runs, num_steps, repeats) -> dict:
 
         err, nees = jax.vmap(one)(jax.random.split(key, num_runs))
         return jnp.sqrt(jnp.mean(err**2, axis=0)), jnp.mean(err, axis=0), jnp.mean(nees, axis=0), jnp.std(nees, axis=0)
+
+    return job
+
+
+def bench_monte_carlo(num_runs, num_steps, repeats) -> dict:
+    model = linear_model(4)
+    dynamax_job = dynamax_monte_carlo_job(model, num_runs, num_steps)
 
     def jt(**kw):
         return lambda: monte_carlo(model, jax.random.key(1), num_runs, num_steps=num_steps, progress=False, **kw).nees

@@ -492,7 +492,7 @@ def test_v14_cost_model(noisy_run, capsys):
     assert (ob.update_multiply_adds(14), ob.update_multiply_adds(8)) == (1428, 528)
     assert (ob.update_multiply_adds(14, joseph=True), ob.update_multiply_adds(8, joseph=True)) == (6916, 1552)
     flops8, flops14 = ob.update_flops(8), ob.update_flops(14)
-    # The library's update is O(n²m) (rank-m Joseph form): the compiled FLOPs fall by ≈ 58%, less
+    # The library's update is O(n²m) (rank-m Joseph form): the compiled FLOPs fall by ≈ 59%, less
     # than the dense O(n³) model's 81% and the spec's optional 60% (see the V14 row).
     assert 0.50 <= 1 - flops8 / flops14 <= 0.70
     t_aam, t_obem = ob.measure_filter_times(noisy_run[1], num_runs=20, repeats=3)

@@ -1268,7 +1268,7 @@ def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = 
                      float(update_multiply_adds(n, joseph=joseph)), 0.0))
     flops = 100 * (1 - update_flops(8) / update_flops(14))
     # jaxtrack's update evaluates the Joseph form through the rank-m structure of I − W H
-    # (O(n²m), not O(n³)), so the compiled FLOPs shrink less than the cubic model: ≈ 58%, not
+    # (O(n²m), not O(n³)), so the compiled FLOPs shrink less than the cubic model: ≈ 59%, not
     # the spec's optional ≥ 60%, whose basis was a dense O(n³) update.
     add(_interval_row("V14", "XLA FLOPs reduction OBEM vs AAM (rank-m update) [%]", 50.0, 100.0, flops))
     t_aam, t_obem = measure_filter_times(b_in)
