@@ -42,9 +42,8 @@ def rows(report: dict) -> list[str]:
         "|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
 
-    def row(job, states, runs, steps, ours, rates):
-        dx, sk, fp = (rates.get(k) for k in ("dynamax", "simdkalman", "FilterPy"))
-        dx = dx if dx is not None else rates.get("dynamax job")
+    def row(job, states, runs, steps, ours, rates, dynamax="dynamax"):
+        dx, sk, fp = (rates.get(k) for k in (dynamax, "simdkalman", "FilterPy"))
         out.append(
             f"| {job} | {states} | {runs:,} × {steps:,} | {_rate(ours)} | {_rate(dx)} | {_rate(sk)} | "
             f"{_rate(fp)} | {_ratio(ours, dx)} | {_ratio(ours, fp)} |"
@@ -61,7 +60,7 @@ def rows(report: dict) -> list[str]:
     if mc:
         rates = mc["steps_per_s"]
         row("full Monte Carlo: simulate, filter, RMSE/NEES", mc["states"], mc["runs"], mc["steps"],
-            rates["jaxtrack monte_carlo"], rates)
+            rates["jaxtrack monte_carlo"], rates, dynamax="dynamax job")
     return out
 
 

@@ -257,10 +257,13 @@ def _block_maps(save, steps, length: int) -> _BlockMaps:
     blocks = jax.tree_util.tree_map(lambda a: a.reshape((-1, length) + a.shape[1:]), steps)
 
     def one(block_steps):
-        f = lambda x, z: _block_outputs(save, x, z, block_steps)  # noqa: E731
+        def f(x, z):
+            out = _block_outputs(save, x, z, block_steps)
+            return out, out  # the value at zero comes back as aux: one evaluation, not two
+
         x0, z0 = jnp.zeros((n,), dtype), jnp.zeros((length, m), dtype)
-        d_x, d_z = jax.jacfwd(f, argnums=(0, 1))(x0, z0)
-        return _BlockMaps(d_z.reshape(-1, length * m).T, d_x.T, f(x0, z0))
+        (d_x, d_z), const = jax.jacfwd(f, argnums=(0, 1), has_aux=True)(x0, z0)
+        return _BlockMaps(d_z.reshape(-1, length * m).T, d_x.T, const)
 
     return jax.vmap(one)(blocks)
 
