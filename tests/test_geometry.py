@@ -48,7 +48,7 @@ def test_V1_enu_to_face_is_RyRz_and_orthonormal(rng):
     T = np.asarray(g.enu_to_face_rotation(psi, theta))
     ref = np.stack([np_Ry(t) @ np_Rz(p) for p, t in zip(psi, theta)])
     np.testing.assert_allclose(T, ref, rtol=RTOL, atol=1e-15)
-    np.testing.assert_allclose(np.asarray(g.rotation_y(theta) @ g.rotation_z(psi)), ref, atol=1e-15)
+    np.testing.assert_allclose(np.asarray(g.rotation_y(theta) @ g.rotation_z(-psi)), ref, atol=1e-15)
     np.testing.assert_allclose(T @ np.swapaxes(T, -1, -2), np.broadcast_to(np.eye(3), T.shape), atol=1e-14)
     np.testing.assert_allclose(np.linalg.det(T), 1.0, rtol=1e-13)
     np.testing.assert_array_equal(np.asarray(g.face_to_enu_rotation(psi, theta)), np.swapaxes(T, -1, -2))

@@ -12,7 +12,8 @@ Conventions (Serakos, Gray, Youssef, "Topics in mitigating radar bias", eqs 1–
 - ENU: x = East, y = North, z = Up, origin at a site.
 - Spherical ``[r, ψ, θ]``: range, azimuth ψ measured **from East towards North** (mathematical
   convention, not compass azimuth), elevation θ up from the horizontal plane.
-- A rotation called ``T_A2B`` maps the components of a vector in frame A to its components in
+- Rotations are active and right-handed (:mod:`jaxtrack.geometry._rotations`); a frame
+  transformation called ``T_A2B`` (``a_to_b_rotation``) maps the components of a vector in frame A to its components in
   frame B: ``v_B = T_A2B @ v_A``.
 - ECEF: Earth-centred, Earth-fixed; x through Greenwich on the equator, z along the spin axis.
   (The paper calls this frame "ECI" although no time or Earth rotation appears; it is ECEF.)
@@ -22,14 +23,13 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from ._rotations import _stack_matrix, rotation_x, rotation_y, rotation_z
+
 __all__ = [
     "WGS84_A",
     "WGS84_E2",
     "spherical_to_cartesian",
     "cartesian_to_spherical",
-    "rotation_x",
-    "rotation_y",
-    "rotation_z",
     "enu_to_face_rotation",
     "face_to_enu_rotation",
     "face_bias_matrix",
@@ -52,9 +52,6 @@ WGS84_E2 = 6.69437999014e-3
 """WGS-84 first eccentricity squared e², unitless."""
 
 
-def _stack_matrix(rows) -> jnp.ndarray:
-    """Build a ``(..., 3, 3)`` array from a 3×3 nested list of same-shaped arrays."""
-    return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def _broadcast(*xs):
@@ -138,33 +135,11 @@ def cartesian_to_spherical(cartesian) -> jnp.ndarray:
 # Elementary rotations and the radar FACE frame (eqs 7–12)
 
 
-def rotation_x(angle) -> jnp.ndarray:
-    """``R1(a) = [[1,0,0],[0,cos a,−sin a],[0,sin a,cos a]]`` (Appendix, R1(L)); ``(...)`` → ``(..., 3, 3)``."""
-    (a,) = _broadcast(angle)
-    c, s, o, i = jnp.cos(a), jnp.sin(a), jnp.zeros_like(a), jnp.ones_like(a)
-    return _stack_matrix([[i, o, o], [o, c, -s], [o, s, c]])
-
-
-def rotation_y(angle) -> jnp.ndarray:
-    """``R_y(a) = [[cos a,0,sin a],[0,1,0],[−sin a,0,cos a]]`` (eq. 7's pitch factor).
-
-    The Appendix's ``R2(Ω) = [[cΩ,0,−sΩ],[0,1,0],[sΩ,0,cΩ]]`` is ``rotation_y(−Ω)``.
-    Shape ``(...)`` → ``(..., 3, 3)``.
-    """
-    (a,) = _broadcast(angle)
-    c, s, o, i = jnp.cos(a), jnp.sin(a), jnp.zeros_like(a), jnp.ones_like(a)
-    return _stack_matrix([[c, o, s], [o, i, o], [-s, o, c]])
-
-
-def rotation_z(angle) -> jnp.ndarray:
-    """``R_z(a) = [[cos a,sin a,0],[−sin a,cos a,0],[0,0,1]]`` (eq. 7's yaw factor); ``(...)`` → ``(..., 3, 3)``."""
-    (a,) = _broadcast(angle)
-    c, s, o, i = jnp.cos(a), jnp.sin(a), jnp.zeros_like(a), jnp.ones_like(a)
-    return _stack_matrix([[c, s, o], [-s, c, o], [o, o, i]])
-
-
 def enu_to_face_rotation(psi, theta) -> jnp.ndarray:
     """``T_ENU2FACE(ψ, θ) = R_y(θ) R_z(ψ)`` in closed form (Serakos et al., eq. 7; eq. 9 for face j).
+
+    The paper's yaw factor ``R_z(ψ)`` is passive; with jaxtrack's active rotations
+    ``T_ENU2FACE = rotation_y(θ) @ rotation_z(−ψ)`` (tested).
 
     ``[[cθcψ, cθsψ, sθ], [−sψ, cψ, 0], [−sθcψ, −sθsψ, cθ]]``. Row 1 is the boresight
     ``u_r = f(1, ψ, θ)``; rows 2 and 3 are the horizontal and vertical cross-range axes
@@ -314,7 +289,7 @@ def enu_site_offset(lat1, lon1, lat2, lon2, h1=0.0, h2=0.0, *, frame: int = 1) -
     **Returns:** ``(..., 3)`` offset, metres.
     """
     if frame not in (1, 2):
-        from ._validation import InputError
+        from .._validation import InputError
 
         raise InputError(f"`frame` must be 1 or 2 (the ENU frame of site 1 or site 2); got {frame!r}.")
     delta = geodetic_to_ecef(lat2, lon2, h2) - geodetic_to_ecef(lat1, lon1, h1)
@@ -348,7 +323,8 @@ def platform_to_enu_rotation(yaw, pitch, roll) -> jnp.ndarray:
     (yaw Δφ, pitch Δη, roll Δψ), applied as roll about the platform y axis, then pitch about the
     intermediate x axis, then yaw about the final z axis:
 
-    ``T_Δψ = [[cψ,0,−sψ],[0,1,0],[sψ,0,cψ]] = R_y(−ψ)``, ``T_Δη = R1(η)``, ``T_Δφ = R_z(φ)``
+    ``T_Δψ = [[cψ,0,−sψ],[0,1,0],[sψ,0,cψ]] = rotation_y(−ψ)``, ``T_Δη = rotation_x(η)``,
+    ``T_Δφ = [[cφ,sφ,0],[−sφ,cφ,0],[0,0,1]] = rotation_z(−φ)`` (active rotations, see :mod:`jaxtrack.geometry`)
 
     (yaw and roll follow the left-hand rule, pitch the right-hand rule). Δφ > 0 turns the
     platform x axis clockwise (a target at compass azimuth θ is seen at θ − Δφ); Δη > 0 tilts the
@@ -360,7 +336,7 @@ def platform_to_enu_rotation(yaw, pitch, roll) -> jnp.ndarray:
     **Returns:** ``(..., 3, 3)`` rotation with ``v_ENU = T @ v_platform``.
     """
     yaw, pitch, roll = _broadcast(yaw, pitch, roll)
-    return rotation_z(yaw) @ rotation_x(pitch) @ rotation_y(-roll)
+    return rotation_z(-yaw) @ rotation_x(pitch) @ rotation_y(-roll)
 
 
 def ecef_to_geodetic(p_ecef, iterations: int = 6) -> tuple[jnp.ndarray, jnp.ndarray, jnp.ndarray]:
