@@ -2,6 +2,9 @@
 
 from ._base import (
     AbstractFilter as AbstractFilter,
+    AbstractUpdateForm as AbstractUpdateForm,
+    JosephForm as JosephForm,
+    StandardForm as StandardForm,
     Conditioned as Conditioned,
     FilterResult as FilterResult,
     condition_linearized as condition_linearized,

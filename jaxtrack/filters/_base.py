@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import abc
 import math
-from typing import Literal, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -67,6 +67,53 @@ def gaussian_log_likelihood(innovation, innovation_cov_chol, num_observed, chol_
     return -0.5 * (whitened @ whitened + log_det + num_observed * math.log(2.0 * math.pi))
 
 
+class AbstractUpdateForm(eqx.Module):
+    """How a linearised update forms the filtered covariance from ``P``, ``H``, ``R`` and ``W``.
+
+    A strategy object for :class:`~jaxtrack.filters.KalmanFilter` and
+    :class:`~jaxtrack.filters.ExtendedKalmanFilter` (``form=``). ``PHt`` is ``P Hᵀ`` and ``H``, ``R``
+    already have missing components removed (:func:`masked_noise`).
+    """
+
+    supports_any_gain: eqx.AbstractClassVar[bool]
+
+    @abc.abstractmethod
+    def covariance(self, cov: Array, PHt: Array, H: Array, R: Array, gain: Array) -> Array:
+        """The filtered covariance ``P⁺`` ``(n, n)`` (symmetric)."""
+
+
+class JosephForm(AbstractUpdateForm):
+    """``P⁺ = (I − W H) P (I − W H)ᵀ + W R Wᵀ`` (Joseph; Ho 1968, eq. (4)): exact for any gain.
+
+    The default. It is the actual error covariance of a filter with a suboptimal or fixed gain,
+    and stays symmetric positive semi-definite under rounding.
+    """
+
+    supports_any_gain: ClassVar[bool] = True
+
+    def covariance(self, cov, PHt, H, R, gain):
+        # Joseph form evaluated through the rank-m structure of I − W H (P is symmetric, so
+        # H P = (P Hᵀ)ᵀ): (I − W H) P = P − W (P Hᵀ)ᵀ, and (I − W H) P (I − W H)ᵀ = A P − (A P Hᵀ) Wᵀ
+        # with A P = (I − W H) P. The same recursion as forming I − W H and two n×n×n products,
+        # in about 4n²m multiply-adds instead of 2n³.
+        AP = cov - matmul(gain, PHt.T)
+        return AP - matmul(matmul(AP, H.T), gain.T) + matmul(matmul(gain, R), gain.T)
+
+
+class StandardForm(AbstractUpdateForm):
+    """``P⁺ = (I − W H) P = P − W (P Hᵀ)ᵀ`` (the textbook form; e.g. Lindgren & Gong 1978, eq. (38)).
+
+    Valid only with the optimal gain ``W = P Hᵀ S⁻¹`` (a supplied gain raises ``InputError``).
+    Cheaper than :class:`JosephForm` by about half, but rounding can make ``P⁺`` indefinite in
+    ill-conditioned problems; studies use it where the paper does.
+    """
+
+    supports_any_gain: ClassVar[bool] = False
+
+    def covariance(self, cov, PHt, H, R, gain):
+        return cov - matmul(gain, PHt.T)
+
+
 def condition_linearized(
     mean: Array,
     cov: Array,
@@ -75,15 +122,17 @@ def condition_linearized(
     R: Array,
     observed: Array,
     gain: Array | None = None,
+    form: AbstractUpdateForm = JosephForm(),
 ) -> Conditioned:
-    """Joseph-form update with a (linearised) measurement matrix, valid for any gain.
+    """Update with a (linearised) measurement matrix; Joseph form (valid for any gain) by default.
 
     .. math::
 
         S = H P Hᵀ + R,\\quad W = P Hᵀ S^{-1}\\ (\\text{unless given}),\\quad
         x⁺ = x + W y,\\quad P⁺ = (I − W H) P (I − W H)ᵀ + W R Wᵀ
 
-    (Ho 1968, eqs. (2)–(4)). Missing components (``observed`` False) are removed as described
+    (Ho 1968, eqs. (2)–(4)); ``form=StandardForm()`` gives ``P⁺ = (I − W H) P`` instead (see
+    :class:`AbstractUpdateForm`). Missing components (``observed`` False) are removed as described
     in :func:`masked_noise`; a supplied gain has its columns for missing components zeroed.
     """
     obs_f = observed.astype(cov.dtype)
@@ -101,12 +150,7 @@ def condition_linearized(
         gain = matmul(matmul(PHt, chol_inv.T), chol_inv)
     else:
         gain = gain * obs_f[None, :]
-    # Joseph form evaluated through the rank-m structure of I − W H (P is symmetric, so
-    # H P = (P Hᵀ)ᵀ): (I − W H) P = P − W (P Hᵀ)ᵀ, and (I − W H) P (I − W H)ᵀ = A P − (A P Hᵀ) Wᵀ
-    # with A P = (I − W H) P. The same recursion as forming I − W H and two n×n×n products,
-    # in about 4n²m multiply-adds instead of 2n³.
-    AP = cov - matmul(gain, PHt.T)
-    new_cov = AP - matmul(matmul(AP, H.T), gain.T) + matmul(matmul(gain, R), gain.T)
+    new_cov = form.covariance(cov, PHt, H, R, gain)
     # The terms round differently; keep P exactly symmetric so that Cholesky factorisations
     # downstream (next S, smoother, NEES) see a symmetric matrix.
     new_cov = symmetrize(new_cov)

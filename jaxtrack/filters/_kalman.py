@@ -8,7 +8,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._validation import InputError, check_finite, check_shape
 from ..models import LinearGaussianModel, at_step
-from ._base import AbstractFilter, condition_linearized
+from ._base import AbstractFilter, AbstractUpdateForm, JosephForm, condition_linearized
 from ._linalg import matmul
 
 
@@ -34,6 +34,8 @@ class KalmanFilter(AbstractFilter):
 
     **Arguments:**
 
+    - ``form``: the covariance update, :class:`~jaxtrack.filters.JosephForm` (default) or
+      :class:`~jaxtrack.filters.StandardForm` (``P⁺ = (I − W H) P``, optimal gain only).
     - ``gain``: optional fixed gain ``W``, shape ``(n, m)`` or per step ``(T, n, m)``. When given,
       it replaces the optimal gain (columns of missing components are zeroed). It is an array leaf,
       so ``jax.grad`` with respect to it works.
@@ -42,13 +44,22 @@ class KalmanFilter(AbstractFilter):
     """
 
     gain: Float[Array, "*T n m"] | None = None
+    form: AbstractUpdateForm = JosephForm()
 
-    def __init__(self, gain: ArrayLike | None = None):
+    def __init__(self, gain: ArrayLike | None = None, form: AbstractUpdateForm = JosephForm()):
+        if not isinstance(form, AbstractUpdateForm):
+            raise InputError(f"`form` must be JosephForm() or StandardForm(); got {form!r}.")
         if gain is not None:
+            if not form.supports_any_gain:
+                raise InputError(
+                    f"`gain` was given with form={type(form).__name__}(), which is valid only for "
+                    f"the optimal gain; use JosephForm() (the default) with a supplied gain."
+                )
             gain = jnp.asarray(gain)
             check_shape("gain", gain, [(None, None), (None, None, None)])
             check_finite("gain", gain)
         self.gain = gain
+        self.form = form
 
     def check_model(self, model):
         if not isinstance(model, LinearGaussianModel):
@@ -67,7 +78,8 @@ class KalmanFilter(AbstractFilter):
         H = model.measurement_matrix(k)
         gain = None if self.gain is None else at_step(self.gain, k, 2)
         return condition_linearized(
-            mean, cov, z - matmul(H, mean), H, model.measurement_noise_cov(k), observed, gain
+            mean, cov, z - matmul(H, mean), H, model.measurement_noise_cov(k), observed, gain,
+            self.form,
         )
 
 
@@ -78,7 +90,12 @@ class ExtendedKalmanFilter(AbstractFilter):
     with the model's Jacobians (``jax.jacfwd`` unless the model supplies them). The innovation is
     ``model.residual(z, h(x̂))``, so angle components wrap to (−π, π]. On a linear model it is the
     Kalman filter.
+
+    **Arguments:** ``form``: the covariance update, :class:`~jaxtrack.filters.JosephForm`
+    (default) or :class:`~jaxtrack.filters.StandardForm`.
     """
+
+    form: AbstractUpdateForm = JosephForm()
 
     def predict(self, model, mean, cov, k):
         return _predict_linearized(model, mean, cov, k, model.transition_jacobian(mean, k))
@@ -87,5 +104,5 @@ class ExtendedKalmanFilter(AbstractFilter):
         H = model.measurement_jacobian(mean, k)
         innovation = model.residual(z, model.measurement(mean, k))
         return condition_linearized(
-            mean, cov, innovation, H, model.measurement_noise_cov(k), observed
+            mean, cov, innovation, H, model.measurement_noise_cov(k), observed, None, self.form
         )

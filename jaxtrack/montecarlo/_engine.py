@@ -1,0 +1,275 @@
+"""The one Monte Carlo primitive: blocks of runs, run ``i`` from ``fold_in(key, i)``, streaming
+accumulation in block order, on one device or dealt out over a mesh, with a progress bar.
+
+Everything that runs many independent runs goes through :func:`run_blocks`:
+:func:`~jaxtrack.montecarlo.monte_carlo` and :func:`~jaxtrack.montecarlo.monte_carlo_sweep`
+(fused simulate-filter-score blocks) and :func:`monte_carlo_map` (any per-run function, used by
+the studies). A *block* is a fixed number of consecutive runs and the unit of compilation and of
+device work; its contribution is a pure function of its start index and the key, and the
+contributions are added to the running totals one block at a time in block order. Hence:
+
+- results do not depend on ``chunk_size`` (progress granularity only) nor on the number of
+  devices or hosts, to the last bit;
+- run ``i`` can be replayed alone from ``jax.random.fold_in(key, i)``;
+- memory is one block plus the totals, whatever the number of runs.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, PartitionSpec as P
+from jaxtyping import PRNGKeyArray, PyTree
+from tqdm.auto import tqdm
+
+from .._validation import InputError
+from ._sharding import RUN_AXIS, axis_size, local_value, place
+
+# (common, value, key, start, valid) -> the block's contribution (a pytree)
+BlockFn = Callable[[Any, Any, PRNGKeyArray, jax.Array, jax.Array], PyTree]
+# (totals, contribution, start) -> new totals
+Accumulate = Callable[[PyTree, PyTree, jax.Array], PyTree]
+
+
+def add_totals(totals, delta, start):
+    """The default accumulation: running sums (``start`` unused)."""
+    del start
+    return jax.tree_util.tree_map(jnp.add, totals, delta)
+
+
+def block_size_for(num_runs: int, largest: int) -> int:
+    """Runs per block: ``largest``, or the next power of two above ``num_runs`` when fewer."""
+    return min(largest, 1 << max(0, (num_runs - 1).bit_length()))
+
+
+def check_mesh(mesh, axes) -> None:
+    if not isinstance(mesh, Mesh):
+        raise InputError(f"`mesh` must be a jax.sharding.Mesh (see jaxtrack.montecarlo.run_mesh); got {type(mesh).__name__}.")
+    if not any(a in mesh.axis_names for a in axes if a is not None):
+        raise InputError(f"`mesh` has axes {mesh.axis_names}; it needs at least one of {tuple(a for a in axes if a)}.")
+
+
+@eqx.filter_jit
+def _one_block(block_fn, accumulate, totals, common, value, key, start, num_runs, block):
+    valid = start + jnp.arange(block) < num_runs
+    return accumulate(totals, block_fn(common, value, key, start, valid), start)
+
+
+@eqx.filter_jit
+def _mesh_round(block_fn, accumulate, totals, common, value, key, start, num_runs, block, mesh, run_axis,
+                sweep_axis):
+    """One round on a mesh: device ``d`` along ``run_axis`` runs block ``start/block + d``; with
+    ``sweep_axis``, every array leaf of ``value`` and ``totals`` has a leading axis over parameter
+    values (sharded along ``sweep_axis`` when the mesh has it) and each device ``lax.map``s over
+    its values. The blocks' contributions are accumulated one at a time in block order."""
+    common_dyn, common_static = eqx.partition((common, key), eqx.is_array)
+    value_dyn, value_static = eqx.partition(value, eqx.is_array)
+    has_run_axis = run_axis in mesh.axis_names
+    num_dev = axis_size(mesh, run_axis)
+
+    def per_device(start, num_runs, common_dyn, value_dyn):
+        common, key = eqx.combine(common_dyn, common_static)
+        block_start = start + (jax.lax.axis_index(run_axis) * block if has_run_axis else 0)
+        valid = block_start + jnp.arange(block) < num_runs
+
+        def one(v):
+            return block_fn(common, eqx.combine(v, value_static), key, block_start, valid)
+
+        delta = one(value_dyn) if sweep_axis is None else jax.lax.map(one, value_dyn)
+        return jax.tree_util.tree_map(lambda a: a[None], delta)
+
+    value_spec = P(sweep_axis) if sweep_axis is not None and sweep_axis in mesh.axis_names else P()
+    out_spec = P(run_axis if has_run_axis else None, *((sweep_axis,) if value_spec != P() else ()))
+    # check_vma=False: the block code is shared with the single-device path and has no
+    # device-varying annotations (its scans would need pcast); the outputs are declared above.
+    deltas = jax.shard_map(
+        per_device, mesh=mesh, in_specs=(P(), P(), P(), value_spec), out_specs=out_spec, check_vma=False
+    )(start, num_runs, common_dyn, value_dyn)
+    for d in range(num_dev):
+        delta = jax.tree_util.tree_map(lambda a: a[d], deltas)
+        if sweep_axis is None:
+            totals = accumulate(totals, delta, start + d * block)
+        else:
+            totals = jax.vmap(accumulate, in_axes=(0, 0, None))(totals, delta, start + d * block)
+    return totals
+
+
+def run_blocks(
+    block_fn: BlockFn,
+    totals: PyTree,
+    *,
+    common: Any,
+    key: PRNGKeyArray,
+    num_runs: int,
+    block: int,
+    value: Any = None,
+    accumulate: Accumulate = add_totals,
+    mesh: Mesh | None = None,
+    run_axis: str = RUN_AXIS,
+    sweep_axis: str | None = None,
+    chunk_size: int = 1000,
+    progress: bool = True,
+    desc: str = "Monte Carlo",
+) -> PyTree:
+    """Run ``num_runs`` runs as blocks of ``block`` runs and accumulate their contributions.
+
+    ``block_fn(common, value, key, start, valid)`` returns the contribution of runs
+    ``start … start+block−1``; ``valid`` ``(block,)`` marks those below ``num_runs`` (the last
+    block is padded; padded runs must contribute nothing). It must be a pure function of its
+    arguments (``block_fn`` and ``accumulate`` are compiled once per function object: pass
+    module-level functions, not fresh lambdas, to reuse compilations). ``accumulate(totals,
+    delta, start)`` folds one block into the totals, always in block order.
+
+    Without ``mesh`` the blocks run one after the other on the default device. With ``mesh``,
+    each round deals one block to each device along ``run_axis``; with ``sweep_axis`` (a sweep
+    over parameter values), ``value`` and ``totals`` carry a leading axis over the values,
+    shared out along ``sweep_axis``. Results are identical on any mesh. ``chunk_size`` sets how
+    many runs pass between progress-bar updates (the host waits only then).
+
+    **Returns:** the accumulated totals, as host arrays.
+    """
+    total = jnp.asarray(num_runs)
+    if mesh is None and sweep_axis is None:
+        def step(totals, start):
+            return _one_block(block_fn, accumulate, totals, common, value, key, jnp.asarray(start), total, block)
+
+        per_round = 1
+    else:
+        if mesh is None:
+            mesh = Mesh(np.asarray(jax.devices()[:1]), (run_axis,))
+        check_mesh(mesh, (sweep_axis, run_axis))
+        per_round = axis_size(mesh, run_axis)
+        value_spec = P(sweep_axis) if sweep_axis is not None and sweep_axis in mesh.axis_names else P()
+        totals, value = place((totals, value), mesh, value_spec)
+        total, key, common = place((total, key, common), mesh)
+
+        def step(totals, start):
+            return _mesh_round(block_fn, accumulate, totals, common, value, key, place(jnp.asarray(start), mesh),
+                               total, block, mesh, run_axis, sweep_axis)
+
+    runs_per_round = per_round * block
+    rounds_per_chunk = max(1, round(chunk_size / runs_per_round))
+    num_rounds = math.ceil(num_runs / runs_per_round)
+    with tqdm(total=num_runs, desc=desc, unit="run", disable=not progress) as bar:
+        done = 0
+        for r in range(num_rounds):
+            totals = step(totals, r * runs_per_round)
+            if (r + 1) % rounds_per_chunk == 0 or r + 1 == num_rounds:
+                totals = jax.block_until_ready(totals)
+                finished = min((r + 1) * runs_per_round, num_runs)
+                bar.update(finished - done)
+                done = finished
+    return local_value(totals)
+
+
+# --------------------------------------------------------------------------------------------
+# monte_carlo_map: any per-run function
+
+
+def _run_keys(key, start, block):
+    return jax.vmap(lambda i: jax.random.fold_in(key, i))(start + jnp.arange(block))
+
+
+def _map_block_sum(common, value, key, start, valid):
+    fn, args = common
+    out = jax.vmap(fn, in_axes=(0, None))(_run_keys(key, start, valid.shape[0]), args)
+
+    def masked_sum(a):
+        a = jnp.asarray(a)
+        if a.dtype == bool or jnp.issubdtype(a.dtype, jnp.integer):
+            a = a.astype(jnp.int32 if jnp.issubdtype(a.dtype, jnp.integer) or a.dtype == bool else a.dtype)
+        mask = valid.reshape(valid.shape + (1,) * (a.ndim - 1))
+        # Padded runs may hold anything (NaN included): zero them, don't weight them.
+        return jnp.sum(jnp.where(mask, a, jnp.zeros((), a.dtype)), axis=0)
+
+    return jax.tree_util.tree_map(masked_sum, out)
+
+
+def _map_block_stack(common, value, key, start, valid):
+    fn, args = common
+    return jax.vmap(fn, in_axes=(0, None))(_run_keys(key, start, valid.shape[0]), args)
+
+
+def _write_block(buffer, delta, start):
+    return jax.tree_util.tree_map(
+        lambda b, d: jax.lax.dynamic_update_slice_in_dim(b, d.astype(b.dtype), start, axis=0), buffer, delta)
+
+
+def monte_carlo_map(
+    fn: Callable[[PRNGKeyArray, Any], PyTree],
+    key: PRNGKeyArray,
+    num_runs: int,
+    *,
+    args: Any = (),
+    reduce: Literal["sum", "stack"] = "sum",
+    block_size: int = 512,
+    mesh: Mesh | None = None,
+    mesh_axis: str = RUN_AXIS,
+    chunk_size: int = 1000,
+    progress: bool = False,
+    desc: str = "Monte Carlo",
+) -> PyTree:
+    """Evaluate ``fn(key_i, args)`` for runs ``i = 0 … num_runs−1`` with ``key_i = fold_in(key, i)``.
+
+    The general entry to the Monte Carlo engine: ``fn`` is one run (simulate, estimate, score)
+    returning a pytree of arrays; it is ``vmap``-ed over blocks of ``block_size`` runs and
+    compiled once. ``args`` (a pytree, e.g. a scenario Module) is passed to every run unchanged
+    and traced, so new values reuse the compilation; ``fn`` itself should be a module-level
+    function (it is part of the compilation cache key).
+
+    **Arguments:**
+
+    - ``fn``: ``(key, args) -> pytree``; ``key``: a PRNG key; ``num_runs``: ``M ≥ 1``.
+    - ``reduce``: ``"sum"`` returns the sum over runs of every leaf (booleans and integers as
+      int32 counts), accumulated in block order (bit-identical for any ``chunk_size`` and mesh);
+      ``"stack"`` returns every run's output with a leading axis ``M`` (memory ``O(M)``).
+    - ``block_size``: runs per compiled block (rounded down to a power of two for few runs).
+    - ``mesh``, ``mesh_axis``: deal blocks out over devices (see :func:`monte_carlo`).
+    - ``chunk_size``, ``progress``, ``desc``: the progress bar.
+
+    **Returns:** the pytree of sums (``"sum"``) or of stacked per-run outputs (``"stack"``), as
+    NumPy arrays.
+
+    Example — the mean squared error of an estimator over 2,000 runs::
+
+        def one_run(key, scenario):
+            z = simulate_measurements(scenario, key)
+            return jnp.sum((estimate(scenario, z) - scenario.truth) ** 2, axis=-1)   # (T,)
+
+        mse = monte_carlo_map(one_run, jax.random.key(0), 2000, args=scenario) / 2000
+    """
+    if not callable(fn):
+        raise InputError(f"`fn` must be callable (key, args) -> pytree; got {type(fn).__name__}.")
+    if not isinstance(num_runs, int) or isinstance(num_runs, bool) or num_runs < 1:
+        raise InputError(f"`num_runs` must be a positive int; got {num_runs!r}.")
+    if not isinstance(block_size, int) or block_size < 1:
+        raise InputError(f"`block_size` must be a positive int; got {block_size!r}.")
+    if not isinstance(chunk_size, int) or chunk_size < 1:
+        raise InputError(f"`chunk_size` must be a positive int; got {chunk_size!r}.")
+    if reduce not in ("sum", "stack"):
+        raise InputError(f"`reduce` must be 'sum' or 'stack'; got {reduce!r}.")
+    block = block_size_for(num_runs, block_size)
+    shape = jax.eval_shape(lambda k, a: fn(k, a), jax.random.fold_in(key, 0), args)
+    if reduce == "sum":
+        def zero(s):
+            dtype = jnp.int32 if (s.dtype == bool or jnp.issubdtype(s.dtype, jnp.integer)) else s.dtype
+            return jnp.zeros(s.shape, dtype)
+
+        totals = jax.tree_util.tree_map(zero, shape)
+        block_fn, accumulate = _map_block_sum, add_totals
+    else:
+        per_round = block * (1 if mesh is None else axis_size(mesh, mesh_axis))
+        padded = -(-num_runs // per_round) * per_round
+        totals = jax.tree_util.tree_map(lambda s: jnp.zeros((padded,) + s.shape, s.dtype), shape)
+        block_fn, accumulate = _map_block_stack, _write_block
+    out = run_blocks(block_fn, totals, common=(fn, args), key=key, num_runs=num_runs, block=block,
+                     accumulate=accumulate, mesh=mesh, run_axis=mesh_axis, chunk_size=chunk_size,
+                     progress=progress, desc=desc)
+    if reduce == "stack":
+        out = jax.tree_util.tree_map(lambda a: a[:num_runs], out)
+    return out
