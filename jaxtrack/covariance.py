@@ -22,8 +22,8 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._validation import InputError, is_concrete
-from .filters import KalmanFilter
-from .filters._base import FirstStep, _Carry, filter_step, prepare_measurements
+from .filters import KalmanFilter, covariance_pass
+from .filters._base import FirstStep, prepare_measurements
 from .models import AbstractStateSpaceModel, LinearGaussianModel
 
 __all__ = [
@@ -65,18 +65,7 @@ def _resolve_steps(model, num_steps):
 
 @eqx.filter_jit
 def _covariance_scan(filter, model, observed, first_step):
-    dtype = model.initial_cov.dtype
-    n = model.state_dim
-    zeros = jnp.zeros(observed.shape, dtype)
-
-    def step(carry, inputs):
-        k, z, obs = inputs
-        carry, (_, pred_cov, post) = filter_step(filter, model, first_step, carry, k, z, obs)
-        return carry, (pred_cov, post.cov, post.gain, post.innovation_cov)
-
-    init = _Carry(jnp.zeros((n,), dtype), model.initial_cov, jnp.zeros((), dtype), jnp.ones((), bool))
-    _, hist = jax.lax.scan(step, init, (jnp.arange(observed.shape[0]), zeros, observed))
-    return CovarianceHistory(*hist)
+    return CovarianceHistory(*covariance_pass(filter, model, observed, first_step))
 
 
 def covariance_recursion(

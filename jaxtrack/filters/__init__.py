@@ -1,21 +1,40 @@
-"""Gaussian filters and smoothers: one predict/update pair per family, one ``lax.scan``."""
+"""Gaussian filters and smoothers: one predict/update pair per family, one step, one ``lax.scan``.
+
+- ``_updates``: the two measurement updates (linearised, moments) and the update forms;
+- ``_base``: :class:`AbstractFilter` (``init``/``step``), :class:`FilterState`, :func:`run_filter`;
+- ``_kalman``, ``_unscented``: the filter families; ``_smoother``: RTS;
+- ``_batch``: many runs at once, with the covariance strategy (shared or per run).
+"""
 
 from ._base import (
     AbstractFilter as AbstractFilter,
-    AbstractUpdateForm as AbstractUpdateForm,
-    JosephForm as JosephForm,
-    StandardForm as StandardForm,
-    Conditioned as Conditioned,
     FilterResult as FilterResult,
-    condition_linearized as condition_linearized,
-    condition_on_moments as condition_on_moments,
-    filter_step as filter_step,
+    FilterState as FilterState,
+    StepOutput as StepOutput,
     run_filter as run_filter,
 )
 from ._batch import (
+    AbstractCovarianceStrategy as AbstractCovarianceStrategy,
+    AutoCovariance as AutoCovariance,
     BatchFilterResult as BatchFilterResult,
+    PerRunCovariance as PerRunCovariance,
+    SharedCovariance as SharedCovariance,
+    covariance_pass as covariance_pass,
     run_filter_batch as run_filter_batch,
 )
-from ._kalman import ExtendedKalmanFilter as ExtendedKalmanFilter, KalmanFilter as KalmanFilter
+from ._kalman import (
+    ExtendedKalmanFilter as ExtendedKalmanFilter,
+    KalmanFilter as KalmanFilter,
+    MeanMap as MeanMap,
+    mean_step as mean_step,
+)
 from ._smoother import SmootherResult as SmootherResult, rts_smoother as rts_smoother
 from ._unscented import UnscentedKalmanFilter as UnscentedKalmanFilter
+from ._updates import (
+    AbstractUpdateForm as AbstractUpdateForm,
+    Conditioned as Conditioned,
+    JosephForm as JosephForm,
+    StandardForm as StandardForm,
+    condition_linearized as condition_linearized,
+    condition_on_moments as condition_on_moments,
+)

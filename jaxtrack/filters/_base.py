@@ -1,8 +1,9 @@
 """The filter family's base class, its result type and the one scan that drives every filter.
 
 A filter is a strategy object (``KalmanFilter()``, ``ExtendedKalmanFilter()``,
-``UnscentedKalmanFilter()``) with one ``predict`` and one ``update``. :func:`run_filter` wraps
-them in one step function and one ``lax.scan``. The same step function is what
+``UnscentedKalmanFilter()``) with one ``predict`` and one ``update``, composed into one public
+step (:meth:`AbstractFilter.step` on a :class:`FilterState`). :func:`run_filter` is one
+``lax.scan`` of that step. The same step function is what
 :mod:`jaxtrack.montecarlo` runs inside ``vmap``, so a Monte Carlo run and a single run execute
 exactly the same arithmetic.
 """
@@ -10,188 +11,83 @@ exactly the same arithmetic.
 from __future__ import annotations
 
 import abc
-import math
-from typing import ClassVar, Literal, NamedTuple
+from typing import Literal, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, check_shape, is_concrete
 from ..models import AbstractStateSpaceModel
-from ._linalg import cholesky_and_inverse, matmul, tril_inverse
+from ._updates import (  # noqa: F401  (re-exported: the update functions' historical home)
+    AbstractUpdateForm,
+    Conditioned,
+    JosephForm,
+    StandardForm,
+    condition_linearized,
+    condition_on_moments,
+    gaussian_log_likelihood,
+    masked_noise,
+    symmetrize,
+)
 
 FirstStep = Literal["update", "predict"]
 Save = Literal["all", "final", "mean"]
 
 
-def symmetrize(a: Array) -> Array:
-    return 0.5 * (a + jnp.swapaxes(a, -1, -2))
+class FilterState(eqx.Module):
+    """The state a filter carries from one measurement to the next (one trajectory).
 
+    **Fields:** ``mean`` ``(n,)`` and ``cov`` ``(n, n)``: the filtered ``x̂_{k/k}``, ``P_{k/k}``
+    (before the first step: the prior); ``log_likelihood`` ``()``: the sum of the innovation
+    log-densities so far; ``step`` ``()`` int: the index ``k`` of the next measurement;
+    ``ok`` ``()`` bool: False once a mean, covariance or the log-likelihood became non-finite.
 
-class Conditioned(NamedTuple):
-    """What one measurement update produces (one step, unbatched)."""
+    Made by :meth:`AbstractFilter.init`, advanced by :meth:`AbstractFilter.step`; it is a pytree,
+    so it can be carried by ``lax.scan``, batched by ``vmap`` and saved between calls.
+    """
 
     mean: Float[Array, " n"]
     cov: Float[Array, "n n"]
-    innovation: Float[Array, " m"]  # z − ẑ, 0 in missing components
-    innovation_cov: Float[Array, "m m"]  # S; identity rows/columns in missing components
-    log_likelihood: Float[Array, ""]  # log N(innovation; 0, S) over the observed components
-    gain: Float[Array, "n m"]  # W used; zero columns in missing components
+    log_likelihood: Float[Array, ""]
+    step: Int[Array, ""]
+    ok: Bool[Array, ""]
 
 
-def masked_noise(R: Array, observed: Bool[Array, " m"]) -> Array:
-    """Measurement noise with missing components decoupled: ``R`` on the observed block, ``I`` else.
+class StepOutput(NamedTuple):
+    """What one :meth:`AbstractFilter.step` produces besides the new state.
 
-    With the matching rows of ``H`` zeroed, ``S = H P Hᵀ + R`` is block diagonal with the identity
-    on the missing block, so the gain has zero columns there and ``log det S`` and ``yᵀS⁻¹y`` equal
-    those of the observed sub-vector: the update is exactly the one with only the observed rows
-    of ``H`` and ``R``, without changing any array shape (so one compilation serves every mask).
-    """
-    both = observed[:, None] & observed[None, :]
-    return jnp.where(both, R, 0.0) + jnp.diag(jnp.where(observed, 0.0, 1.0).astype(R.dtype))
-
-
-def gaussian_log_likelihood(innovation, innovation_cov_chol, num_observed, chol_inv=None) -> Array:
-    """``log N(y; 0, S)`` over ``num_observed`` components, given ``L = chol(S)`` (lower).
-
-    With ``chol_inv = L⁻¹`` the innovation is whitened by a product rather than a triangular
-    solve, which stays unbatched on the factor side under ``vmap`` (see ``_linalg``).
-    """
-    if chol_inv is None:
-        chol_inv = tril_inverse(innovation_cov_chol)
-    whitened = matmul(chol_inv, innovation)
-    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(innovation_cov_chol)))
-    return -0.5 * (whitened @ whitened + log_det + num_observed * math.log(2.0 * math.pi))
-
-
-class AbstractUpdateForm(eqx.Module):
-    """How a linearised update forms the filtered covariance from ``P``, ``H``, ``R`` and ``W``.
-
-    A strategy object for :class:`~jaxtrack.filters.KalmanFilter` and
-    :class:`~jaxtrack.filters.ExtendedKalmanFilter` (``form=``). ``PHt`` is ``P Hᵀ`` and ``H``, ``R``
-    already have missing components removed (:func:`masked_noise`).
+    ``predicted_mean`` ``(n,)``, ``predicted_cov`` ``(n, n)``: ``x̂_{k/k-1}``, ``P_{k/k-1}`` (the
+    prior at ``k = 0`` with ``first_step="update"``); ``conditioned``: the update's
+    :class:`Conditioned` (filtered moments, innovation, its covariance, the gain, the step's
+    log-likelihood).
     """
 
-    supports_any_gain: eqx.AbstractClassVar[bool]
-
-    @abc.abstractmethod
-    def covariance(self, cov: Array, PHt: Array, H: Array, R: Array, gain: Array) -> Array:
-        """The filtered covariance ``P⁺`` ``(n, n)`` (symmetric)."""
-
-
-class JosephForm(AbstractUpdateForm):
-    """``P⁺ = (I − W H) P (I − W H)ᵀ + W R Wᵀ`` (Joseph; Ho 1968, eq. (4)): exact for any gain.
-
-    The default. It is the actual error covariance of a filter with a suboptimal or fixed gain,
-    and stays symmetric positive semi-definite under rounding.
-    """
-
-    supports_any_gain: ClassVar[bool] = True
-
-    def covariance(self, cov, PHt, H, R, gain):
-        # Joseph form evaluated through the rank-m structure of I − W H (P is symmetric, so
-        # H P = (P Hᵀ)ᵀ): (I − W H) P = P − W (P Hᵀ)ᵀ, and (I − W H) P (I − W H)ᵀ = A P − (A P Hᵀ) Wᵀ
-        # with A P = (I − W H) P. The same recursion as forming I − W H and two n×n×n products,
-        # in about 4n²m multiply-adds instead of 2n³.
-        AP = cov - matmul(gain, PHt.T)
-        return AP - matmul(matmul(AP, H.T), gain.T) + matmul(matmul(gain, R), gain.T)
-
-
-class StandardForm(AbstractUpdateForm):
-    """``P⁺ = (I − W H) P = P − W (P Hᵀ)ᵀ`` (the textbook form; e.g. Lindgren & Gong 1978, eq. (38)).
-
-    Valid only with the optimal gain ``W = P Hᵀ S⁻¹`` (a supplied gain raises ``InputError``).
-    Cheaper than :class:`JosephForm` by about half, but rounding can make ``P⁺`` indefinite in
-    ill-conditioned problems; studies use it where the paper does.
-    """
-
-    supports_any_gain: ClassVar[bool] = False
-
-    def covariance(self, cov, PHt, H, R, gain):
-        return cov - matmul(gain, PHt.T)
-
-
-def condition_linearized(
-    mean: Array,
-    cov: Array,
-    innovation: Array,
-    H: Array,
-    R: Array,
-    observed: Array,
-    gain: Array | None = None,
-    form: AbstractUpdateForm = JosephForm(),
-) -> Conditioned:
-    """Update with a (linearised) measurement matrix; Joseph form (valid for any gain) by default.
-
-    .. math::
-
-        S = H P Hᵀ + R,\\quad W = P Hᵀ S^{-1}\\ (\\text{unless given}),\\quad
-        x⁺ = x + W y,\\quad P⁺ = (I − W H) P (I − W H)ᵀ + W R Wᵀ
-
-    (Ho 1968, eqs. (2)–(4)); ``form=StandardForm()`` gives ``P⁺ = (I − W H) P`` instead (see
-    :class:`AbstractUpdateForm`). Missing components (``observed`` False) are removed as described
-    in :func:`masked_noise`; a supplied gain has its columns for missing components zeroed.
-    """
-    obs_f = observed.astype(cov.dtype)
-    H = H * obs_f[:, None]
-    R = masked_noise(R, observed)
-    innovation = jnp.where(observed, innovation, 0.0)
-    # Small products go through `matmul` (element-wise loops under vmap, see `_linalg`).
-    PHt = matmul(cov, H.T)
-    S = symmetrize(matmul(H, PHt) + R)
-    chol, chol_inv = cholesky_and_inverse(S)
-    if gain is None:
-        # W = P Hᵀ S⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹ with S = L Lᵀ. Products with L⁻¹ rather than a
-        # triangular solve: for small m the factor is written out (no LAPACK call per run
-        # under vmap), and a factor shared by a batch stays unbatched.
-        gain = matmul(matmul(PHt, chol_inv.T), chol_inv)
-    else:
-        gain = gain * obs_f[None, :]
-    new_cov = form.covariance(cov, PHt, H, R, gain)
-    # The terms round differently; keep P exactly symmetric so that Cholesky factorisations
-    # downstream (next S, smoother, NEES) see a symmetric matrix.
-    new_cov = symmetrize(new_cov)
-    new_mean = mean + matmul(gain, innovation)
-    ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f), chol_inv)
-    return Conditioned(new_mean, new_cov, innovation, S, ll, gain)
-
-
-def condition_on_moments(
-    mean: Array,
-    cov: Array,
-    innovation: Array,
-    innovation_cov: Array,
-    cross_cov: Array,
-    observed: Array,
-) -> Conditioned:
-    """Update from moments (sigma-point filters): ``W = C S⁻¹``, ``P⁺ = P − W S Wᵀ``.
-
-    ``cross_cov`` is ``C = Cov(x, z)`` (n, m) and ``innovation_cov`` is ``S = Cov(z)`` including R.
-    Missing components are removed as in :func:`masked_noise`.
-    """
-    obs_f = observed.astype(cov.dtype)
-    both = observed[:, None] & observed[None, :]
-    S = jnp.where(both, innovation_cov, 0.0) + jnp.diag(1.0 - obs_f)
-    S = symmetrize(S)
-    C = cross_cov * obs_f[None, :]
-    innovation = jnp.where(observed, innovation, 0.0)
-    chol, chol_inv = cholesky_and_inverse(S)
-    gain = matmul(matmul(C, chol_inv.T), chol_inv)
-    # Symmetric in exact arithmetic; see condition_linearized.
-    new_cov = symmetrize(cov - matmul(matmul(gain, S), gain.T))
-    new_mean = mean + matmul(gain, innovation)
-    ll = gaussian_log_likelihood(innovation, chol, jnp.sum(obs_f), chol_inv)
-    return Conditioned(new_mean, new_cov, innovation, S, ll, gain)
+    predicted_mean: Float[Array, " n"]
+    predicted_cov: Float[Array, "n n"]
+    conditioned: Conditioned
 
 
 class AbstractFilter(eqx.Module):
-    """A Gaussian filter: one :meth:`predict` and one :meth:`update`.
+    """A Gaussian filter: one :meth:`predict` and one :meth:`update`, composed by :meth:`step`.
 
-    Concrete filters are final classes; wrap, don't subclass. Both methods act on ONE trajectory
-    (no batch axis); batches come from ``jax.vmap``.
+    Concrete filters are final classes; wrap, don't subclass. Every method acts on ONE trajectory
+    (no batch axis); batches come from ``jax.vmap``. :func:`run_filter` is one ``lax.scan`` of
+    :meth:`step`, and :mod:`jaxtrack.montecarlo` runs the same :meth:`step` inside ``vmap``.
+
+    Manual stepping (a real-time loop: one measurement at a time, as it arrives)::
+
+        kf = KalmanFilter()
+        state = kf.init(model)
+        step = jax.jit(kf.step)                    # compiled once
+        for z in sensor:                           # z: (m,), NaN-free; mask with `observed`
+            state, out = step(model, state, z)
+            print(state.mean, out.conditioned.innovation)
+
+    ``step`` reads the measurement index from ``state.step`` (per-step model arrays are indexed
+    by it) and returns the same filtered moments as :func:`run_filter` to the last bit.
     """
 
     @abc.abstractmethod
@@ -214,6 +110,68 @@ class AbstractFilter(eqx.Module):
 
     def check_model(self, model: AbstractStateSpaceModel) -> None:
         """Raise ``InputError`` if this filter cannot run on ``model`` (trace-time check)."""
+
+    def covariance_is_data_free(self, model: AbstractStateSpaceModel) -> bool:
+        """Whether this filter's covariances and gains on ``model`` do not depend on the data.
+
+        When True (the Kalman filter on a linear model), batches of runs that share a
+        measurement schedule can compute the covariances once for all runs
+        (:class:`~jaxtrack.filters.SharedCovariance`); the filter then also provides
+        ``mean_map``. The default is False: every run carries its own covariance.
+        """
+        return False
+
+    def init(self, model: AbstractStateSpaceModel) -> FilterState:
+        """The state before the first measurement: the model's prior, log-likelihood 0, step 0."""
+        dtype = model.initial_cov.dtype
+        return FilterState(
+            model.initial_mean,
+            model.initial_cov,
+            jnp.zeros((), dtype),
+            jnp.zeros((), jnp.int32),
+            jnp.ones((), bool),
+        )
+
+    def step(
+        self,
+        model: AbstractStateSpaceModel,
+        state: FilterState,
+        z: ArrayLike,
+        observed: ArrayLike | None = None,
+        *,
+        first_step: FirstStep = "update",
+    ) -> tuple[FilterState, StepOutput]:
+        """One predict + update: the single step function every filter run executes.
+
+        **Arguments:**
+
+        - ``model``: the state-space model; ``state``: the :class:`FilterState` after
+          measurement ``k − 1`` (``k = state.step``; from :meth:`init` before the first).
+        - ``z``: measurement ``k``, ``(m,)``, in the model's units.
+        - ``observed``: optional boolean ``(m,)``, True where ``z`` is observed (default: all).
+          Missing components of ``z`` are ignored (they may hold NaN).
+        - ``first_step``: where the prior sits, as in :func:`run_filter`: with ``"update"`` step 0
+          does not predict.
+
+        **Returns:** ``(new_state, StepOutput)``.
+        """
+        k = state.step
+        z = jnp.asarray(z, state.mean.dtype)
+        observed = jnp.ones(z.shape, bool) if observed is None else jnp.asarray(observed)
+        z = jnp.where(observed, z, 0.0)
+        pred_mean, pred_cov = self.predict(model, state.mean, state.cov, k)
+        if first_step == "update":
+            # The prior already sits at the first measurement: no transition into step 0.
+            at_start = k == 0
+            pred_mean = jnp.where(at_start, state.mean, pred_mean)
+            pred_cov = jnp.where(at_start, state.cov, pred_cov)
+        post = self.update(model, pred_mean, pred_cov, z, observed, k)
+        ll = state.log_likelihood + post.log_likelihood
+        finite = (
+            jnp.all(jnp.isfinite(post.mean)) & jnp.all(jnp.isfinite(post.cov)) & jnp.isfinite(ll)
+        )
+        new_state = FilterState(post.mean, post.cov, ll, k + 1, state.ok & finite)
+        return new_state, StepOutput(pred_mean, pred_cov, post)
 
 
 class FilterResult(eqx.Module):
@@ -249,59 +207,18 @@ class FilterResult(eqx.Module):
     ok: Bool[Array, ""]
 
 
-class _Carry(NamedTuple):
-    mean: Array
-    cov: Array
-    log_likelihood: Array
-    ok: Array
-
-
-def filter_step(
-    filter: AbstractFilter,
-    model: AbstractStateSpaceModel,
-    first_step: FirstStep,
-    carry: _Carry,
-    k: Array,
-    z: Array,
-    observed: Array,
-):
-    """One predict + update: the single step function every filter run executes.
-
-    Returns ``(new_carry, (predicted_mean, predicted_cov, conditioned))``.
-    """
-    pred_mean, pred_cov = filter.predict(model, carry.mean, carry.cov, k)
-    if first_step == "update":
-        # The prior already sits at the first measurement: no transition into step 0.
-        at_start = k == 0
-        pred_mean = jnp.where(at_start, carry.mean, pred_mean)
-        pred_cov = jnp.where(at_start, carry.cov, pred_cov)
-    post = filter.update(model, pred_mean, pred_cov, z, observed, k)
-    ll = carry.log_likelihood + post.log_likelihood
-    finite = (
-        jnp.all(jnp.isfinite(post.mean)) & jnp.all(jnp.isfinite(post.cov)) & jnp.isfinite(ll)
-    )
-    new_carry = _Carry(post.mean, post.cov, ll, carry.ok & finite)
-    return new_carry, (pred_mean, pred_cov, post)
-
-
 def _scan_filter(filter, model, measurements, observed, first_step, save):
-    num_steps = measurements.shape[0]
+    """:meth:`AbstractFilter.step` over every measurement, as one ``lax.scan``."""
     dtype = model.initial_cov.dtype
-    init = _Carry(
-        model.initial_mean,
-        model.initial_cov,
-        jnp.zeros((), dtype),
-        jnp.ones((), bool),
-    )
 
-    def step(carry, inputs):
-        k, z, obs = inputs
-        carry, (pm, pc, post) = filter_step(filter, model, first_step, carry, k, z, obs)
+    def step(state, inputs):
+        z, obs = inputs
+        state, (pm, pc, post) = filter.step(model, state, z, obs, first_step=first_step)
         if save == "final":
-            return carry, None
+            return state, None
         if save == "mean":
-            return carry, post.mean
-        return carry, (
+            return state, post.mean
+        return state, (
             post.mean,
             post.cov,
             pm,
@@ -311,8 +228,7 @@ def _scan_filter(filter, model, measurements, observed, first_step, save):
             jnp.sum(obs.astype(dtype)),
         )
 
-    ks = jnp.arange(num_steps)
-    final, hist = jax.lax.scan(step, init, (ks, measurements, observed))
+    final, hist = jax.lax.scan(step, filter.init(model), (measurements, observed))
     if save == "final":
         hist = (None,) * 7
     elif save == "mean":

@@ -18,8 +18,9 @@ The two paths execute the same recursion and agree to rounding (tested to 1e-10)
 
 from __future__ import annotations
 
+import abc
 import math
-from typing import Literal, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -28,18 +29,10 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._validation import InputError, check_shape, is_concrete
-from ..models import AbstractStateSpaceModel, LinearGaussianModel, at_step
-from ._base import (
-    AbstractFilter,
-    FilterResult,
-    FirstStep,
-    Save,
-    _Carry,
-    _scan_filter,
-    filter_step,
-)
-from ._kalman import KalmanFilter
-from ._linalg import cholesky_and_inverse, matmul
+from ..models import AbstractStateSpaceModel
+from ._base import AbstractFilter, FilterResult, FirstStep, Save, _scan_filter
+from ._kalman import MeanMap, mean_step
+from ._linalg import cholesky_and_inverse
 
 CovarianceMode = Literal["auto", "shared", "per_run"]
 
@@ -122,24 +115,34 @@ class SharedCovariances(NamedTuple):
     ok: Array  # ()
 
 
-def shared_covariances(filter, model, observed, first_step: FirstStep) -> SharedCovariances:
-    """The data-free covariance pass: :func:`filter_step` on zero measurements (traceable).
+def covariance_pass(filter: AbstractFilter, model: AbstractStateSpaceModel, observed, first_step: FirstStep):
+    """The data-free covariance pass: :meth:`~jaxtrack.filters.AbstractFilter.step` on zero data.
 
-    Because it is the same step function as every filter run, the covariances and gains are
-    exactly those of :func:`run_filter` on any data with the schedule ``observed`` ``(T, m)``.
+    The one place where a filter's covariances are computed without data; used by
+    :func:`jaxtrack.covariance.covariance_recursion`, the shared-covariance path of
+    :func:`run_filter_batch` and :func:`~jaxtrack.montecarlo.monte_carlo`. Because it is the same
+    step function as every filter run, the covariances and gains are exactly those of
+    :func:`~jaxtrack.filters.run_filter` on any data with the schedule ``observed`` ``(T, m)``
+    whenever ``filter.covariance_is_data_free(model)``. Traceable; returns the per-step
+    ``(predicted_cov, filtered_cov, gain, innovation_cov)``, each with a leading ``T``.
     """
     dtype = model.initial_cov.dtype
-    n = model.state_dim
     zeros = jnp.zeros(observed.shape, dtype)
+    state = filter.init(model)
+    state = eqx.tree_at(lambda s: s.mean, state, jnp.zeros_like(state.mean))
 
-    def step(carry, inputs):
-        k, z, obs = inputs
-        carry, (_, pred_cov, post) = filter_step(filter, model, first_step, carry, k, z, obs)
-        return carry, (pred_cov, post.cov, post.gain, post.innovation_cov)
+    def step(state, inputs):
+        z, obs = inputs
+        state, (_, pred_cov, post) = filter.step(model, state, z, obs, first_step=first_step)
+        return state, (pred_cov, post.cov, post.gain, post.innovation_cov)
 
-    init = _Carry(jnp.zeros((n,), dtype), model.initial_cov, jnp.zeros((), dtype), jnp.ones((), bool))
-    ks = jnp.arange(observed.shape[0])
-    _, (pred_cov, filt_cov, gain, innov_cov) = jax.lax.scan(step, init, (ks, zeros, observed))
+    return jax.lax.scan(step, state, (zeros, observed))[1]
+
+
+def shared_covariances(filter, model, observed, first_step: FirstStep) -> SharedCovariances:
+    """:func:`covariance_pass` plus the factors the shared mean pass needs (traceable)."""
+    dtype = model.initial_cov.dtype
+    pred_cov, filt_cov, gain, innov_cov = covariance_pass(filter, model, observed, first_step)
     # The same factorisation condition_linearized applies to the same S.
     chol, chol_inv = jax.vmap(cholesky_and_inverse)(innov_cov)
     num_obs = jnp.sum(observed.astype(dtype), axis=-1)
@@ -149,53 +152,9 @@ def shared_covariances(filter, model, observed, first_step: FirstStep) -> Shared
     return SharedCovariances(pred_cov, filt_cov, gain, innov_cov, chol_inv, offset, num_obs, ok)
 
 
-class _MeanMaps(NamedTuple):
-    """Per-step affine maps of the mean recursion with shared gains (all with a leading ``T``).
-
-    With ``Φ_k``, ``b_k`` the transition into step ``k`` (identity and 0 at ``k = 0`` when the
-    prior sits at the first measurement) and ``W_k`` the gain:
-    ``x⁻ = Φ x + b``, ``y = z − H x⁻``, ``x⁺ = x⁻ + W y = A x + W z + c`` with
-    ``A = (I − W H) Φ``, ``c = (I − W H) b``; ``y = z − (H Φ) x − H b``.
-    """
-
-    transition: Array  # Φ_k (T, n, n)
-    offset: Array  # b_k (T, n)
-    update: Array  # A_k (T, n, n)
-    update_offset: Array  # c_k (T, n)
-    innovation_map: Array  # H_k Φ_k (T, m, n)
-    innovation_offset: Array  # H_k b_k (T, m)
-
-
-def _mean_maps(model: LinearGaussianModel, gain, num_steps, first_step) -> _MeanMaps:
-    n = model.state_dim
-    dtype = model.initial_cov.dtype
-    eye = jnp.eye(n, dtype=dtype)
-
-    def at(k):
-        phi = model.transition_matrix(k)
-        b = jnp.zeros((n,), dtype) if model.b is None else at_step(model.b, k, 1)
-        if first_step == "update":
-            phi = jnp.where(k == 0, eye, phi)
-            b = jnp.where(k == 0, 0.0, b)
-        H = model.measurement_matrix(k)
-        IWH = eye - gain[k] @ H
-        return _MeanMaps(phi, b, IWH @ phi, IWH @ b, H @ phi, H @ b)
-
-    return jax.vmap(at)(jnp.arange(num_steps))
-
-
-def mean_step(mp: _MeanMaps, gain, x, z, observed):
-    """One step of the mean recursion with shared gains (:class:`_MeanMaps` at step ``k``).
-
-    ``x`` is ``(n,)`` or ``(n, B)`` (runs as the trailing axis), ``z`` ``(m,)`` or ``(m, B)``,
-    ``observed`` ``(m,)``. Missing components of ``z`` are zeroed (they may hold NaN) and their
-    innovations are 0. Returns ``(x⁺, y)``: ``x⁺ = A x + W z + c``, ``y = z − (HΦ) x − Hb``.
-    """
-    col = (lambda v: v) if x.ndim == 1 else (lambda v: v[:, None])  # noqa: E731
-    z = jnp.where(col(observed), z, 0.0)
-    post = matmul(mp.update, x) + matmul(gain, z) + col(mp.update_offset)
-    innovation = z - matmul(mp.innovation_map, x) - col(mp.innovation_offset)
-    return post, jnp.where(col(observed), innovation, 0.0)
+def mean_maps(filter, model, gain, first_step: FirstStep) -> MeanMap:
+    """The filter's :meth:`~jaxtrack.filters.KalmanFilter.mean_map` at every step (leading ``T``)."""
+    return jax.vmap(lambda k: filter.mean_map(model, gain[k], k, first_step))(jnp.arange(gain.shape[0]))
 
 
 # Inputs per block of the blocked mean pass: about 16 measurement components, so that a block
@@ -268,7 +227,7 @@ def _block_maps(save, steps, length: int) -> _BlockMaps:
     return jax.vmap(one)(blocks)
 
 
-def _mean_pass(model: LinearGaussianModel, cov: SharedCovariances, z, observed, first_step, save):
+def _mean_pass(filter, model, cov: SharedCovariances, z, observed, first_step, save):
     """Means of ``B`` runs with shared gains, a block of ``L`` steps at a time.
 
     With shared gains the mean recursion is affine in the measurements (:class:`_MeanMaps`),
@@ -291,7 +250,7 @@ def _mean_pass(model: LinearGaussianModel, cov: SharedCovariances, z, observed, 
     num_runs, num_steps, m = z.shape
     n = model.state_dim
     dtype = model.initial_cov.dtype
-    maps = _mean_maps(model, cov.gain, num_steps, first_step)
+    maps = mean_maps(filter, model, cov.gain, first_step)
     steps = (maps, cov.gain, cov.innovation_chol_inv, observed)
     length = _block_length(m, num_steps)
     num_blocks, rest = divmod(num_steps, length)
@@ -341,7 +300,7 @@ def _mean_pass(model: LinearGaussianModel, cov: SharedCovariances, z, observed, 
 @eqx.filter_jit
 def _run_shared(filter, model, z, observed, first_step, save, throw):
     cov = shared_covariances(filter, model, observed, first_step)
-    x, ll, ok, hist = _mean_pass(model, cov, z, observed, first_step, save)
+    x, ll, ok, hist = _mean_pass(filter, model, cov, z, observed, first_step, save)
     ok = ok & cov.ok
     hist = tuple(hist) + (None,) * (3 - len(hist))
     keep_cov = save == "all"
@@ -415,14 +374,93 @@ def _maybe_throw(result, throw):
     )
 
 
-def shared_covariance_applies(filter, model, mask_is_shared: bool) -> bool:
-    """Whether the shared-covariance path computes what the per-run path would.
+class AbstractCovarianceStrategy(eqx.Module):
+    """How a batch of runs gets its covariances: once for all runs, or one per run.
 
-    True for a :class:`KalmanFilter` (optimal or fixed gain) on a
-    :class:`~jaxtrack.models.LinearGaussianModel` when every run has the same measurement
-    schedule: then no covariance, gain or innovation covariance depends on the data.
+    A strategy object for :func:`run_filter_batch` and :func:`~jaxtrack.montecarlo.monte_carlo`
+    (``covariance=``), in the spirit of diffrax's ``adjoint=``: the choice of *how* is an object
+    that owns its behaviour, and the filter declares what it can do
+    (:meth:`~jaxtrack.filters.AbstractFilter.covariance_is_data_free`).
     """
-    return isinstance(filter, KalmanFilter) and isinstance(model, LinearGaussianModel) and mask_is_shared
+
+    shared: ClassVar[bool]
+
+    @abc.abstractmethod
+    def applies(self, filter: AbstractFilter, model: AbstractStateSpaceModel, mask_is_shared: bool) -> bool:
+        """Whether this strategy computes what running every run alone would."""
+
+    @abc.abstractmethod
+    def run_batch(self, filter, model, z, observed, first_step, save, throw) -> "BatchFilterResult":
+        """Filter the batch ``z`` ``(B, T, m)`` (already validated)."""
+
+
+class SharedCovariance(AbstractCovarianceStrategy):
+    """Covariances, gains and innovation covariances computed once for the whole batch.
+
+    Applies when the filter's covariances do not depend on the data (the Kalman filter on a
+    linear model) and every run has the same measurement schedule. One data-free
+    :func:`covariance_pass` serves all runs; only the means are propagated per run, ``L`` steps
+    of all runs per matrix product (the mean recursion with fixed gains is affine:
+    :meth:`~jaxtrack.filters.KalmanFilter.mean_map`).
+    """
+
+    shared: ClassVar[bool] = True
+
+    def applies(self, filter, model, mask_is_shared):
+        return bool(mask_is_shared and filter.covariance_is_data_free(model))
+
+    def run_batch(self, filter, model, z, observed, first_step, save, throw):
+        return _run_shared(filter, model, z, observed, first_step, save, throw)
+
+
+class PerRunCovariance(AbstractCovarianceStrategy):
+    """Every run carries its own covariance: ``vmap`` of the single-run scan, in blocks of runs.
+
+    Always applies (EKF, UKF, per-run masks, any model).
+    """
+
+    shared: ClassVar[bool] = False
+
+    def applies(self, filter, model, mask_is_shared):
+        return True
+
+    def run_batch(self, filter, model, z, observed, first_step, save, throw):
+        return _run_per_run(filter, model, z, observed, first_step, save, throw)
+
+
+class AutoCovariance(eqx.Module):
+    """Pick :class:`SharedCovariance` where it applies, else :class:`PerRunCovariance` (the default)."""
+
+
+CovarianceMode = Literal["auto", "shared", "per_run"] | AbstractCovarianceStrategy | AutoCovariance
+_BY_NAME = {"auto": AutoCovariance, "shared": SharedCovariance, "per_run": PerRunCovariance}
+
+
+def resolve_covariance(covariance, filter, model, mask_is_shared: bool) -> AbstractCovarianceStrategy:
+    """The concrete strategy for ``covariance`` (an object, or ``"auto"``/``"shared"``/``"per_run"``).
+
+    Raises ``InputError`` for an unknown value or a :class:`SharedCovariance` that does not apply.
+    """
+    if isinstance(covariance, str):
+        if covariance not in _BY_NAME:
+            raise InputError(f"`covariance` must be 'auto', 'shared' or 'per_run'; got {covariance!r}.")
+        covariance = _BY_NAME[covariance]()
+    if isinstance(covariance, AutoCovariance):
+        shared = SharedCovariance()
+        return shared if shared.applies(filter, model, mask_is_shared) else PerRunCovariance()
+    if not isinstance(covariance, AbstractCovarianceStrategy):
+        raise InputError(
+            "`covariance` must be SharedCovariance(), PerRunCovariance(), AutoCovariance() or one of "
+            f"'auto', 'shared', 'per_run'; got {covariance!r}."
+        )
+    if not covariance.applies(filter, model, mask_is_shared):
+        raise InputError(
+            "`covariance='shared'` (SharedCovariance) needs a filter whose covariances do not depend "
+            "on the data (a KalmanFilter on a LinearGaussianModel) and one measurement schedule for "
+            "every run (a mask of shape (T,) or (T, m), and nan_as_missing=False); use "
+            "covariance='auto' or 'per_run'."
+        )
+    return covariance
 
 
 @jax.jit
@@ -521,8 +559,9 @@ def run_filter_batch(
     - ``save``: ``"all"``, ``"final"``, or ``"mean"`` (filtered means only, plus the final state
       and the log-likelihoods; the cheapest way to get every estimate).
     - ``throw``: raise if any run became non-finite (``throw=False``: read ``result.ok``).
-    - ``covariance``: ``"auto"`` (default), ``"shared"`` (raise ``InputError`` if it does not
-      apply) or ``"per_run"``.
+    - ``covariance``: a strategy, :class:`AutoCovariance` (default, also ``"auto"``),
+      :class:`SharedCovariance` (``"shared"``; ``InputError`` if it does not apply) or
+      :class:`PerRunCovariance` (``"per_run"``).
 
     **Returns:** a :class:`BatchFilterResult`; ``result.run(i)`` is run ``i`` as a
     :class:`~jaxtrack.filters.FilterResult`.
@@ -538,22 +577,11 @@ def run_filter_batch(
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
     if save not in ("all", "final", "mean"):
         raise InputError(f"`save` must be 'all', 'final' or 'mean'; got {save!r}.")
-    if covariance not in ("auto", "shared", "per_run"):
-        raise InputError(f"`covariance` must be 'auto', 'shared' or 'per_run'; got {covariance!r}.")
     if not isinstance(filter, AbstractFilter):
         raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
     if not isinstance(model, AbstractStateSpaceModel):
         raise InputError(f"`model` must be a jaxtrack state-space model; got {type(model).__name__}.")
     filter.check_model(model)
     z, observed = _prepare_batch(model, measurements, mask, nan_as_missing)
-    shared_ok = shared_covariance_applies(filter, model, observed.ndim == 2)
-    if covariance == "shared" and not shared_ok:
-        raise InputError(
-            "`covariance='shared'` needs a KalmanFilter on a LinearGaussianModel and one "
-            "measurement schedule for every run (a mask of shape (T,) or (T, m), and "
-            "nan_as_missing=False); use covariance='auto' or 'per_run'."
-        )
-    if shared_ok and covariance != "per_run":
-        return _run_shared(filter, model, z, observed, first_step, save, throw)
-    return _run_per_run(filter, model, z, observed, first_step, save, throw)
-
+    strategy = resolve_covariance(covariance, filter, model, observed.ndim == 2)
+    return strategy.run_batch(filter, model, z, observed, first_step, save, throw)

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._validation import InputError, check_finite, check_shape
 from ..models import LinearGaussianModel, at_step
-from ._base import AbstractFilter, AbstractUpdateForm, JosephForm, condition_linearized
+from ._base import AbstractFilter
+from ._updates import AbstractUpdateForm, JosephForm, condition_linearized
 from ._linalg import matmul
 
 
@@ -71,8 +74,33 @@ class KalmanFilter(AbstractFilter):
             n, m = model.state_dim, model.meas_dim
             check_shape("gain", self.gain, [(n, m), (None, n, m)])
 
+    def covariance_is_data_free(self, model):
+        # P, W and S follow from F, H, Q, R, the prior and the schedule alone.
+        return isinstance(model, LinearGaussianModel)
+
     def predict(self, model, mean, cov, k):
         return _predict_linearized(model, mean, cov, k, model.transition_matrix(k))
+
+    def mean_map(self, model: LinearGaussianModel, gain: Array, k: Array, first_step="update") -> "MeanMap":
+        """The update of the mean at step ``k`` as an affine map, given this step's gain ``W_k``.
+
+        With the covariances computed once for a batch (they do not depend on the data), the
+        mean recursion of :meth:`predict` + :meth:`update` is affine in the previous mean and
+        the measurement: ``x⁺ = A x + W z + c``. Used, with :func:`mean_step`, by the
+        shared-covariance paths of :func:`~jaxtrack.filters.run_filter_batch` and
+        :func:`~jaxtrack.montecarlo.monte_carlo`; equal to :meth:`update` to rounding (tested).
+        """
+        n = model.state_dim
+        dtype = model.initial_cov.dtype
+        eye = jnp.eye(n, dtype=dtype)
+        phi = model.transition_matrix(k)
+        b = jnp.zeros((n,), dtype) if model.b is None else at_step(model.b, k, 1)
+        if first_step == "update":
+            phi = jnp.where(k == 0, eye, phi)
+            b = jnp.where(k == 0, 0.0, b)
+        H = model.measurement_matrix(k)
+        IWH = eye - gain @ H
+        return MeanMap(phi, b, IWH @ phi, IWH @ b, H @ phi, H @ b)
 
     def update(self, model, mean, cov, z, observed, k):
         H = model.measurement_matrix(k)
@@ -106,3 +134,34 @@ class ExtendedKalmanFilter(AbstractFilter):
         return condition_linearized(
             mean, cov, innovation, H, model.measurement_noise_cov(k), observed, None, self.form
         )
+
+
+class MeanMap(NamedTuple):
+    """Per-step affine maps of the mean recursion with shared gains (one step, or with a leading ``T``).
+
+    With ``Φ_k``, ``b_k`` the transition into step ``k`` (identity and 0 at ``k = 0`` when the
+    prior sits at the first measurement) and ``W_k`` the gain:
+    ``x⁻ = Φ x + b``, ``y = z − H x⁻``, ``x⁺ = x⁻ + W y = A x + W z + c`` with
+    ``A = (I − W H) Φ``, ``c = (I − W H) b``; ``y = z − (H Φ) x − H b``.
+    """
+
+    transition: Array  # Φ_k (T, n, n)
+    offset: Array  # b_k (T, n)
+    update: Array  # A_k (T, n, n)
+    update_offset: Array  # c_k (T, n)
+    innovation_map: Array  # H_k Φ_k (T, m, n)
+    innovation_offset: Array  # H_k b_k (T, m)
+
+
+def mean_step(mp: MeanMap, gain, x, z, observed):
+    """One step of the mean recursion with shared gains (the :class:`MeanMap` of step ``k``).
+
+    ``x`` is ``(n,)`` or ``(n, B)`` (runs as the trailing axis), ``z`` ``(m,)`` or ``(m, B)``,
+    ``observed`` ``(m,)``. Missing components of ``z`` are zeroed (they may hold NaN) and their
+    innovations are 0. Returns ``(x⁺, y)``: ``x⁺ = A x + W z + c``, ``y = z − (HΦ) x − Hb``.
+    """
+    col = (lambda v: v) if x.ndim == 1 else (lambda v: v[:, None])  # noqa: E731
+    z = jnp.where(col(observed), z, 0.0)
+    post = matmul(mp.update, x) + matmul(gain, z) + col(mp.update_offset)
+    innovation = z - matmul(mp.innovation_map, x) - col(mp.innovation_offset)
+    return post, jnp.where(col(observed), innovation, 0.0)

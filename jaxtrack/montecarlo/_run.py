@@ -34,15 +34,9 @@ from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 from tqdm.auto import tqdm
 
 from .._validation import InputError, check_shape
-from ..filters import AbstractFilter, KalmanFilter, filter_step
-from ..filters._base import FirstStep, _Carry
-from ..filters._batch import (
-    CovarianceMode,
-    _mean_maps,
-    mean_step,
-    shared_covariance_applies,
-    shared_covariances,
-)
+from ..filters import AbstractFilter, FilterState, KalmanFilter, mean_step
+from ..filters._base import FirstStep
+from ..filters._batch import CovarianceMode, mean_maps, resolve_covariance, shared_covariances
 from ..filters._linalg import all_rows, cholesky_and_inverse, matmul, sum_rows
 from ..models import AbstractStateSpaceModel, at_step
 from ._metrics import chi2_mean_bounds, normalized_squared_error
@@ -183,8 +177,7 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, k
     dtype = filter_model.initial_cov.dtype
 
     def one(filt, x, z, k, obs):
-        z = jnp.where(obs, z, 0.0)
-        filt, (_, _, post) = filter_step(filter, filter_model, first_step, filt, k, z, obs)
+        filt, (_, _, post) = filter.step(filter_model, filt, z, obs, first_step=first_step)
         error = x - post.mean
         nees = normalized_squared_error(error, post.cov)
         nis = normalized_squared_error(post.innovation, post.innovation_cov)
@@ -198,12 +191,7 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, k
         ok = ok & filt.ok & jnp.isfinite(nees) & jnp.isfinite(nis)
         return (filt, x, eps, ok), _masked_sums(use, error, nees, nis, axis=0)
 
-    filt0 = _Carry(
-        jnp.broadcast_to(filter_model.initial_mean, (block, filter_model.state_dim)),
-        jnp.broadcast_to(filter_model.initial_cov, (block,) + filter_model.initial_cov.shape),
-        jnp.zeros((block,), dtype),
-        jnp.ones((block,), bool),
-    )
+    filt0 = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (block,) + a.shape), filter.init(filter_model))
     ks = jnp.arange(observed.shape[0])
     init = (filt0, x0, eps0, jnp.ones((block,), bool))
     (_, _, _, ok), sums = jax.lax.scan(step, init, (ks, observed))
@@ -266,7 +254,7 @@ def _shared_setup(filter, filter_model, truth, observed, first_step):
     num_steps = observed.shape[0]
     factors = noise_factors(truth, num_steps)
     cov = shared_covariances(filter, filter_model, observed, first_step)
-    maps = _mean_maps(filter_model, cov.gain, num_steps, first_step)
+    maps = mean_maps(filter, filter_model, cov.gain, first_step)
     nees_factor = jax.vmap(cholesky_and_inverse)(cov.filtered_cov)[1]
     return factors, cov, maps, nees_factor
 
@@ -387,8 +375,6 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
         raise InputError(f"`chunk_size` must be a positive int; got {chunk_size!r}.")
     if first_step not in ("update", "predict"):
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
-    if covariance not in ("auto", "shared", "per_run"):
-        raise InputError(f"`covariance` must be 'auto', 'shared' or 'per_run'; got {covariance!r}.")
     num_steps = _resolve_num_steps(truth, num_steps if num_steps is not None else filter_model.num_steps)
     _resolve_num_steps(filter_model, num_steps)
     m = truth.meas_dim
@@ -401,12 +387,7 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
             raise InputError(f"`mask` must be boolean (True = observed); got dtype {mask.dtype}.")
         observed = jnp.broadcast_to(mask[:, None] if mask.ndim == 1 else mask, (num_steps, m))
 
-    shared = shared_covariance_applies(filter, filter_model, True) and covariance != "per_run"
-    if covariance == "shared" and not shared:
-        raise InputError(
-            "`covariance='shared'` needs a KalmanFilter on a LinearGaussianModel filter model; "
-            "use covariance='auto' or 'per_run'."
-        )
+    shared = resolve_covariance(covariance, filter, filter_model, True).shared
     block = _block_size(num_runs, _SHARED_BLOCK if shared else _PER_RUN_BLOCK)
     return _Prepared(filter, filter_model, num_steps, observed, shared, block)
 
