@@ -4,8 +4,35 @@ import os
 
 import jax
 import pytest
+from jaxtyping import install_import_hook
 
-import jaxtrack  # noqa: F401  (switches on float64)
+# Runtime shape checking: the jaxtyping annotations of the numeric layers (function arguments and
+# returns, equinox Module fields) are checked by beartype while the tests run, so the shapes the
+# docstrings and annotations promise are the shapes the code produces. Off outside the test suite
+# (no cost for users); JAXTRACK_TYPECHECK=0 turns it off here too. The user-facing entry points
+# (run_filter, model constructors, monte_carlo, design, the CLI) are left out on purpose: they
+# validate their inputs themselves and raise InputError naming the argument, which the tests
+# check, and a type checker in front of them would answer first with a different error.
+TYPECHECKED = [
+    "jaxtrack.filters._updates",
+    "jaxtrack.filters._kalman",
+    "jaxtrack.filters._unscented",
+    "jaxtrack.filters._smoother",
+    "jaxtrack.filters._linalg",
+    "jaxtrack.filters._consider",
+    "jaxtrack.covariance",
+    "jaxtrack.geometry",
+    "jaxtrack.estimation",
+    "jaxtrack.montecarlo._metrics",
+    "jaxtrack.montecarlo._cep",
+    "jaxtrack.models._ins",
+    "jaxtrack.applications",
+]
+if os.environ.get("JAXTRACK_TYPECHECK", "1") != "0":
+    with install_import_hook(TYPECHECKED, "beartype.beartype"):
+        import jaxtrack  # noqa: F401  (switches on float64)
+else:
+    import jaxtrack  # noqa: F401
 
 jax.config.update("jax_enable_x64", True)
 # Catch accidental rank broadcasting between e.g. (n,) and (n, 1).

@@ -8,6 +8,7 @@ errors of the spec's own estimate) or within bounds derived from the runs' stand
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -205,7 +206,8 @@ def test_v8_observable_case_and_least_squares_limit():
     k = 8
     A, Z = _stack(H, z, 1.0, k)
     R = sigma**2 * np.eye(k)
-    x_ls, P_ls = (np.asarray(a) for a in bt.least_squares_estimate(A, Z, R))
+    ls = bt.least_squares_estimate(A, Z, R)
+    x_ls, P_ls = np.asarray(ls.mean), np.asarray(ls.cov)
     np.testing.assert_allclose(P_ls, np.linalg.inv(A.T @ A / sigma**2), rtol=1e-10)
     a_sharp = P_ls @ A.T / sigma**2
     Pk = phi(k) @ phi(k).T
@@ -242,25 +244,25 @@ def test_v10_observability_rank_and_null_vector(r1):
     xr = np.asarray(r1.relative)
     for k in range(3, 13):
         A = bt.stacked_measurement_matrix(H, r1.sample_period, k)
-        assert bt.observability(A).rank == 3
+        assert bt.observability(A).rank() == 3
         if k <= 11:  # (A-7): the true relative state spans the null space on leg 1
             assert np.linalg.norm(np.asarray(A) @ xr[k]) < 1e-9 * np.linalg.norm(xr[k])
     A12 = np.asarray(bt.stacked_measurement_matrix(H, r1.sample_period, 12))
     null12 = np.concatenate([xr[12, :2], xr[11, 2:]])  # x_R(12) already has the post-maneuver velocity
     assert np.linalg.norm(A12 @ null12) < 1e-9 * np.linalg.norm(null12)
     assert np.linalg.norm(A12 @ xr[12]) > 0.1 * np.linalg.norm(xr[12])
-    sv = bt.observability(A12).singular_values
+    sv = np.asarray(bt.observability(A12).singular_values)
     assert np.all(np.abs(sv[:3] - [449.73, 12.43, 1.327]) <= [0.005, 0.005, 0.0005])
     assert sv[3] < 1e-12 * sv[0]
     for k in (13, 18, 24, 30, 36, 48):
-        assert bt.observability(bt.stacked_measurement_matrix(H, r1.sample_period, k)).rank == 4
+        assert bt.observability(bt.stacked_measurement_matrix(H, r1.sample_period, k)).rank() == 4
     for k, smallest in ((13, 0.0101), (24, 0.0253)):
-        sv = bt.observability(bt.stacked_measurement_matrix(H, r1.sample_period, k)).singular_values
+        sv = np.asarray(bt.observability(bt.stacked_measurement_matrix(H, r1.sample_period, k)).singular_values)
         assert sv[-1] == pytest.approx(smallest, abs=5e-5)
     # Zero bearing rate: R3's first leg runs down the line of sight, rank 2.
     r3 = bt.geometry("R3")
     A = bt.stacked_measurement_matrix(bt.measurement_row(r3.bearings[1:]), r3.sample_period, 12)
-    assert bt.observability(A, rtol=1e-6).rank == 2
+    assert bt.observability(A).rank(rtol=1e-6) == 2
 
 
 def test_v11_scale_invariance_of_bearings():
@@ -333,8 +335,12 @@ def test_v15_table1_target_state_and_library_kalman_filter(r1):
     rs0 = float(r1.slant_range[0])
     t2 = table2(r1, bm, rs0)
     t1 = bt.relative_state_filter(bm, r1.observer_input, r1.sample_period, SIG, rs0, jnp.full(49, rs0), rs0**2)
-    np.testing.assert_allclose(t1.mean, t2.mean, rtol=1e-9, atol=1e-6)
-    np.testing.assert_allclose(t1.cov, rs0**2 * np.asarray(t2.cov), rtol=1e-8, atol=1e-12 * rs0**2)
+    # Equal in exact arithmetic; Table 1 scales P and R by r_s(0)² = 1e8 in a recursion whose
+    # condition number is about 1e7, so the two differ by rounding: 3.9e-6 m on positions of
+    # 2.6 km (2.2e-9 relative) with the library update, 1.7e-6 m with the study's former private
+    # recursion. The tolerance bounds that rounding, not a modelling difference.
+    np.testing.assert_allclose(t1.mean, t2.mean, rtol=1e-9, atol=1e-5)
+    np.testing.assert_allclose(t1.cov, rs0**2 * np.asarray(t2.cov), rtol=1e-8, atol=1e-11 * rs0**2)  # 1.4e-4 of 1e8
     tt = bt.target_state_filter(bm, r1.observer, r1.sample_period, SIG, rs0)
     np.testing.assert_allclose(np.asarray(tt.mean) - np.asarray(r1.observer), t2.mean, rtol=0, atol=1e-6)  # Fig. 3
     np.testing.assert_allclose(tt.cov, t2.cov, rtol=1e-9, atol=1e-18)
@@ -438,7 +444,7 @@ def test_v22_turning_observer_with_general_input(r2):
     np.testing.assert_allclose(err[0.0][[13, 15]], [-1697.8, -78.9], rtol=1e-3)
     shifted_states = np.asarray(r2.observer).copy()
     shifted_states[13, 1] += 0.03  # 3 cm across the line of sight
-    shifted = r2._replace(observer=jnp.asarray(shifted_states))
+    shifted = eqx.tree_at(lambda s: s.observer, r2, jnp.asarray(shifted_states))
     u = bt.observer_input(shifted.observer, shifted.sample_period)
     moved = ranges_of(shifted, table2(shifted, shifted.bearings, 0.0, inputs=u))[13] - float(shifted.slant_range[13])
     assert abs(moved - err[0.0][13]) > 1.0  # measured 1.5 m
@@ -609,9 +615,16 @@ def test_v30_float64_default_and_float32_failure(r1):
         bm, r1.observer_input.astype(f32), r1.sample_period.astype(f32), jnp.asarray(SIG, f32), jnp.asarray(10_000.0, f32)
     ))(bms[:50].astype(f32))
     assert est32.mean.dtype == f32
-    indefinite = (np.linalg.eigvalsh(np.asarray(est32.cov, np.float64))[..., 0] < 0).any(axis=1)
-    err = np.abs(np.asarray(est32.mean, np.float64)[..., :2] - np.asarray(est64.mean[:50, :, :2])).max(axis=(1, 2))
-    # Measured with this key: 30 of 50 indefinite (spec: 20), 30 runs off by > 1 km, worst 34 km
+    # The library update factors S = H P H' + σ² (Cholesky): a run whose P_N turned so indefinite
+    # that S < 0 continues as NaN (the filter's ok = False) rather than with a finite, meaningless
+    # P_N. Definiteness and errors are therefore judged on each run's finite samples only.
+    cov32 = np.asarray(est32.cov, np.float64)
+    finite = np.isfinite(cov32).all(axis=(-2, -1))
+    eig_min = np.linalg.eigvalsh(np.where(finite[..., None, None], cov32, 0.0))[..., 0]
+    indefinite = (finite & (eig_min < 0)).any(axis=1)
+    err = np.nanmax(np.abs(np.asarray(est32.mean, np.float64)[..., :2] - np.asarray(est64.mean[:50, :, :2])), axis=(1, 2))
+    # Measured with this key: 15 of 50 indefinite, all of which then turn NaN (spec: 20; the
+    # report's own recursion, dividing by S, gave 30), 19 runs off by > 1 km, worst 32 km
     # (spec: 850 km; over other keys 34 km … 3700 km, the tail is heavy).
     assert indefinite.sum() >= 15
     assert (err > 1e3).sum() >= 15 and err.max() > 1e4

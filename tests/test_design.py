@@ -121,11 +121,11 @@ def test_T35_allocation_algebra():
 
 def test_allocation_of_three_staggered_trajectories():
     a = ho.allocation_example()
-    assert a["stage"] == [34, 19, 4]
-    assert a["new_total_rate"] == pytest.approx(25.0, rel=1e-12)
-    assert np.all(np.asarray(a["delta_c"]) < 0)  # over capacity: every rate drops
-    np.testing.assert_allclose(a["dJ_predicted"], a["dJ_predicted"][0], rtol=1e-12)
-    actual = np.asarray(a["dJ_actual"])
+    assert list(np.asarray(a.stage)) == [34, 19, 4]
+    assert a.new_total_rate == pytest.approx(25.0, rel=1e-12)
+    assert np.all(np.asarray(a.delta_c) < 0)  # over capacity: every rate drops
+    np.testing.assert_allclose(a.dJ_predicted, a.dJ_predicted[0], rtol=1e-12)
+    actual = np.asarray(a.dJ_actual)
     assert np.all(actual > 0) and actual.max() / actual.min() < 1.15  # nearly equal, as intended
 
 
@@ -133,20 +133,20 @@ def test_maneuver_compensation_monte_carlo():
     """III-D: 10 g → 13 g for 10 samples from 2.5 s; eq. (80) shortens τ by 0.0144 s. 20,000 runs;
     a variance estimate's relative error is below 3·sqrt(2/M) = 3% with 99.7% probability."""
     mc = ho.maneuver_monte_carlo(20_000, seed=1)
-    theory, hw = mc["theory"], mc["rel_halfwidth"]
-    assert theory["uncompensated"] / theory["nominal"] - 1 > 0.09  # +9.6% without compensation
-    assert abs(theory["compensated"] / theory["nominal"] - 1) < 0.02  # first-order: −1.7%
+    theory, hw = mc.theory, mc.rel_halfwidth
+    assert theory.uncompensated / theory.nominal - 1 > 0.09  # +9.6% without compensation
+    assert abs(theory.compensated / theory.nominal - 1) < 0.02  # first-order: −1.7%
     for name in ("uncompensated", "compensated"):
-        assert abs(mc[name] / theory[name] - 1) < hw
-    assert abs(mc["compensated"] / theory["nominal"] - 1) < hw + 0.02
-    assert mc["uncompensated"] / theory["nominal"] - 1 > hw + 0.03
+        assert abs(getattr(mc, name) / getattr(theory, name) - 1) < hw
+    assert abs(mc.compensated / theory.nominal - 1) < hw + 0.02
+    assert mc.uncompensated / theory.nominal - 1 > hw + 0.03
 
 
 def test_maneuver_indices_analytic_equal_autodiff():
     ex = ho.maneuver_example()
     from jaxtrack.design import maneuver_period_change
 
-    a = maneuver_period_change(ex["model_fn"], 0.1, 10.0, 3.0, L_POS)
-    b = maneuver_period_change(ex["model_fn"], 0.1, 10.0, 3.0, L_POS, method=Autodiff())
+    a = maneuver_period_change(ex.model_fn, 0.1, 10.0, 3.0, L_POS)
+    b = maneuver_period_change(ex.model_fn, 0.1, 10.0, 3.0, L_POS, method=Autodiff())
     assert a.delta_tau == pytest.approx(b.delta_tau, rel=1e-10)
     assert a.delta_tau == pytest.approx(-0.0143819, abs=5e-7) and a.s_a > 0 and a.s_tau > 0

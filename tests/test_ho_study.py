@@ -87,31 +87,31 @@ def test_T28_adjoint_values():
 def test_T29_velocity_measurement_experiment():
     v1 = ho.velocity_measurement_estimate(3.5, 1.0)
     v10 = ho.velocity_measurement_estimate(4.3, 10.0)
-    assert v1["P22"] == pytest.approx(413.25, abs=5e-3)
-    assert v1["estimate"] == pytest.approx(128.4, abs=0.05)
-    assert v1["actual_reduction"] == pytest.approx(325.1, abs=0.05)  # 876.3 → 551.2
-    assert v10["estimate"] == pytest.approx(399.1, abs=0.05)
-    assert v10["actual_reduction"] == pytest.approx(998.1, abs=0.05)  # 2249.4 → 1251.3
+    assert v1.P22 == pytest.approx(413.25, abs=5e-3)
+    assert v1.estimate == pytest.approx(128.4, abs=0.05)
+    assert v1.actual_reduction == pytest.approx(325.1, abs=0.05)  # 876.3 → 551.2
+    assert v10.estimate == pytest.approx(399.1, abs=0.05)
+    assert v10.actual_reduction == pytest.approx(998.1, abs=0.05)  # 2249.4 → 1251.3
     # The paper's first-order estimates are conservative: the actual gain is 2.5× larger.
-    assert v1["actual_reduction"] > 2 * v1["estimate"] and v10["actual_reduction"] > 2 * v10["estimate"]
+    assert v1.actual_reduction > 2 * v1.estimate and v10.actual_reduction > 2 * v10.estimate
 
 
 def test_T30_T31_T32_sec4_examples():
     ex1 = ho.sec4_example1(0.1)
-    assert ex1["rho"] == pytest.approx(0.84051, abs=5e-6)
-    assert ex1["tau_scale"] == pytest.approx(1.87052, abs=5e-6)
-    assert ex1["r_x"] == pytest.approx(2.92227, abs=5e-6)
-    assert ex1["alpha"] == pytest.approx(4.0463e-5, abs=5e-10)
-    assert ex1["p_x"] == pytest.approx(0.923146, abs=5e-7)
-    assert ex1["p_x_ft2"] == pytest.approx(3159.00, abs=5e-3)
+    assert ex1.rho == pytest.approx(0.84051, abs=5e-6)
+    assert ex1.tau_scale == pytest.approx(1.87052, abs=5e-6)
+    assert ex1.r_x == pytest.approx(2.92227, abs=5e-6)
+    assert ex1.alpha == pytest.approx(4.0463e-5, abs=5e-10)
+    assert ex1.p_x == pytest.approx(0.923146, abs=5e-7)
+    assert ex1.p_x_ft2 == pytest.approx(3159.00, abs=5e-3)
     # Known discrepancy (spec §6 item 6): the paper reads 1.06 off its nomogram; eq. (129) gives 1.102.
     ex1b = ho.sec4_example1(0.2)
-    assert ex1b["p_x"] == pytest.approx(1.101877, abs=5e-7)
-    assert abs(ex1b["p_x"] - 1.06) > 0.04
+    assert ex1b.p_x == pytest.approx(1.101877, abs=5e-7)
+    assert abs(ex1b.p_x - 1.06) > 0.04
     ex3 = ho.sec4_example3()
-    assert ex3["p_x"] == pytest.approx(0.75, abs=1e-12)
-    assert ex3["a_needed"] == pytest.approx(-1.0, abs=1e-12)
-    assert ex3["r_x_needed"] == pytest.approx(0.84, abs=1e-12)
+    assert ex3.p_x == pytest.approx(0.75, abs=1e-12)
+    assert ex3.a_needed == pytest.approx(-1.0, abs=1e-12)
+    assert ex3.r_x_needed == pytest.approx(0.84, abs=1e-12)
 
 
 def test_every_paper_row_passes():
@@ -120,3 +120,15 @@ def test_every_paper_row_passes():
     assert not failing, failing
     ids = {r.id for r in rows}
     assert {f"T{i}" for i in (15, *range(16, 26), 28, 29, 30, 31, 32)} <= ids
+
+
+def test_results_are_modules_and_bad_times_raise():
+    import equinox as eqx
+
+    from jaxtrack import InputError
+
+    assert isinstance(ho.sec4_example3(), eqx.Module)
+    with pytest.raises(InputError, match="`t`"):
+        ho.velocity_measurement_estimate(3.55, 1.0)
+    with pytest.raises(InputError, match="detect_time"):
+        ho.maneuver_example(detect_time=2.55)

@@ -16,6 +16,7 @@ import pytest
 
 from jaxtrack import InputError, geometry
 from jaxtrack.applications import obem_registration as ob
+from jaxtrack.estimation import observability, weighted_least_squares
 from jaxtrack.filters import KalmanFilter, condition_linearized, run_filter
 from jaxtrack.models import LinearGaussianModel
 
@@ -137,7 +138,7 @@ def test_platform_rotation_geometry_function_batches():
 
 def test_v2_first_order():
     def err(a):
-        return float(np.linalg.norm(np.asarray(ob.attitude_matrix(a)) - np.asarray(ob.attitude_first_order(a))))
+        return float(np.linalg.norm(np.asarray(ob.attitude_matrix(a)) - np.asarray(jnp.eye(3) + geometry.platform_attitude_error_matrix(*a))))
 
     for scale in (1.0, 0.5, 0.1):
         ratio = err(scale * ALPHA) / err(0.5 * scale * ALPHA)
@@ -146,8 +147,8 @@ def test_v2_first_order():
     expected = np.array([[[0, 1, 0], [-1, 0, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, -1], [0, 1, 0]],
                          [[0, 0, -1], [0, 0, 0], [1, 0, 0]]], dtype=float)
     np.testing.assert_allclose(np.moveaxis(np.asarray(gens), -1, 0), expected, atol=1e-15)
-    np.testing.assert_allclose(ob.attitude_generators(), expected, atol=0)
-    delta = np.asarray(ob.attitude_error_matrix(ALPHA))
+    np.testing.assert_allclose(geometry.platform_attitude_generators(), expected, atol=0)
+    delta = np.asarray(geometry.platform_attitude_error_matrix(*ALPHA))
     np.testing.assert_allclose(delta, -delta.T, atol=0)
     omega = np.array([ALPHA[1], -ALPHA[2], -ALPHA[0]])
     v = np.array([3.0, -1.0, 2.0])
@@ -157,7 +158,7 @@ def test_v2_first_order():
 def test_v3_enu_to_ecef(rng, scenario):
     for _ in range(5):
         lat, lon = rng.uniform(-1.4, 1.4), rng.uniform(-np.pi, np.pi)
-        t = np.asarray(ob.enu_to_ecef_rotation(lat, lon))
+        t = np.asarray(geometry.ecef_to_enu_rotation(lat, lon)).T
         np.testing.assert_allclose(t, t_enu2ecef_eq11(lat, lon), atol=1e-15)
         np.testing.assert_allclose(t.T @ t, np.eye(3), atol=1e-15)
     x1 = np.asarray(geometry.geodetic_to_ecef(*scenario.ship_sites[0]))
@@ -185,10 +186,10 @@ def test_v3_ecef_geodetic_round_trip(rng):
 
 
 def test_radar_spherical_convention():
-    x = ob.radar_to_cartesian(jnp.array([1000.0, 30 * DEG, 10 * DEG]))
+    x = geometry.compass_spherical_to_cartesian(jnp.array([1000.0, 30 * DEG, 10 * DEG]))
     np.testing.assert_allclose(x, 1000 * np.array([np.sin(30 * DEG) * np.cos(10 * DEG),
                                                    np.cos(30 * DEG) * np.cos(10 * DEG), np.sin(10 * DEG)]), atol=1e-9)
-    back = ob.cartesian_to_radar(jnp.array([-1.0, -1.0, 0.0]))
+    back = geometry.cartesian_to_compass_spherical(jnp.array([-1.0, -1.0, 0.0]))
     assert float(back[1]) == pytest.approx(-135 * DEG)
 
 
@@ -213,7 +214,7 @@ def test_v5_attitude_jacobian_and_ocr_row(rng):
     for _ in range(5):
         raw, site = random_geometry(rng)
         x = np.asarray(ob.offset_corrected_position(raw, jnp.zeros(4)))
-        t = ob.enu_to_ecef_rotation(site[0], site[1])
+        t = geometry.ecef_to_enu_rotation(site[0], site[1]).T
         jac = np.asarray(jax.jacfwd(lambda a: t @ ob.attitude_matrix(a) @ x)(jnp.zeros(3)))
         d = np.asarray(ob.attitude_jacobian(x, site[0], site[1]))
         np.testing.assert_allclose(jac, d_matrix_19(x, site[0], site[1]), rtol=1e-12, atol=1e-8)
@@ -227,7 +228,7 @@ def test_v6_azimuth_yaw_identity(rng):
     for _ in range(20):
         raw, site = random_geometry(rng)
         x = ob.offset_corrected_position(raw, jnp.zeros(4))
-        ta3 = np.asarray(ob.enu_to_ecef_rotation(site[0], site[1]) @ ob.offset_jacobian(raw))[:, 2]
+        ta3 = np.asarray(geometry.ecef_to_enu_rotation(site[0], site[1]).T @ ob.offset_jacobian(raw))[:, 2]
         d1 = np.asarray(ob.attitude_jacobian(x, site[0], site[1]))[:, 0]
         assert np.linalg.norm(ta3 + d1) / np.linalg.norm(d1) < 1e-12
 
@@ -296,11 +297,11 @@ def test_v10_proposition2_check_values():
 
 
 def test_v10_proposition2_random_geometry(rng):
-    gap_az, gap_el = ob._random_prop2_gap(jax.random.key(10))
+    gap_az, gap_el = ob.rows._random_prop2_gap(jax.random.key(10))
     assert gap_az < 0.03 and gap_el < 0.06
     assert gap_el > 0.02  # not trivially zero: the residual is second order, ≈ 0.05°
     raw = np.stack([rng.uniform(20e3, 150e3, 200), rng.uniform(-np.pi, np.pi, 200), rng.uniform(0, 10 * DEG, 200)], -1)
-    x = ob.radar_to_cartesian(raw)
+    x = geometry.compass_spherical_to_cartesian(raw)
     assert float(jnp.max(jnp.abs(ob.equivalent_errors_exact(ALPHA, x)[:, 0]))) < 1e-9
 
     def residual(a):
@@ -327,9 +328,9 @@ def test_v10_east_axis_special_case():
 
 def test_v11_observability(free_track, biased_track):
     _, inp = free_track
-    o14 = ob.observability(inp.H)
-    o12 = ob.observability(ob.merged_columns(inp.H))
-    o8 = ob.observability(ob.obem_columns(inp.H))
+    o14 = observability(inp.H)
+    o12 = observability(ob.merged_columns(inp.H))
+    o8 = observability(ob.obem_columns(inp.H))
     assert o14.num_null() == 3
     assert o12.num_null() == 1
     assert float(o8.condition) < 1e3
@@ -345,7 +346,7 @@ def test_v11_observability(free_track, biased_track):
     others = [i for i in angles if i not in idx]
     assert np.linalg.norm(v[others]) < 0.02 * np.linalg.norm(tilt)
     # With H from biased raw data the direction is only weakly observable (spec: 1.9e-6, cond ≈ 2e6).
-    o12b = ob.observability(ob.merged_columns(biased_track[1].H))
+    o12b = observability(ob.merged_columns(biased_track[1].H))
     assert float(o12b.eigenvalues[0]) == pytest.approx(1.9e-6, rel=0.1)
 
 
@@ -362,7 +363,7 @@ def test_v11_baseline_rotation_is_a_null_direction(scenario, free_track):
     scale = np.linalg.norm(np.asarray(inp.H)[:, :, 8:], axis=1).max()
     assert hv[0].max() < 1e-12 * scale
     assert hv.max() < 2e-3 * scale
-    null = ob.observability(ob.merged_columns(inp.H)).physical_direction(0)
+    null = observability(ob.merged_columns(inp.H)).physical_direction(0)
     tilt = null[[ob.MERGED_STATES.index(s) for s in ("Δη1", "Δψ1", "Δη2", "Δψ2")]]
     ref = att[:, 1:].ravel()
     assert abs(tilt @ ref) / (np.linalg.norm(tilt) * np.linalg.norm(ref)) > 0.9999
@@ -374,7 +375,7 @@ def test_v11_baseline_rotation_is_a_null_direction(scenario, free_track):
 @pytest.mark.xfail(strict=True, reason="Proposition 1 as stated ('the 12-state model is observable') is false: "
                    "a common rotation about the baseline stays unobservable (spec §2.4 [X], §6 item 25)")
 def test_v11_proposition1_as_stated(free_track):
-    o12 = ob.observability(ob.merged_columns(free_track[1].H))
+    o12 = observability(ob.merged_columns(free_track[1].H))
     assert o12.num_null() == 0
 
 
@@ -394,11 +395,11 @@ def test_v12_kf_equals_batch_wls(noisy_run):
     # is diffuse enough for the prior to be invisible at 1e-6 and still well inside float64.
     diffuse = 1e6 * ob.prior_cov("obem")
     est = ob.registration_filter(inp.Z, h8, inp.R, diffuse)
-    assert scaled_rel(est.mean[-1], ob.batch_wls(inp.Z, h8, inp.R)) < 1e-6
+    assert scaled_rel(est.mean[-1], weighted_least_squares(h8, inp.Z, inp.R).mean) < 1e-6
     # With a proper prior the KF is exactly the regularised batch solution.
     p0 = ob.prior_cov("obem")
     est = ob.registration_filter(inp.Z, h8, inp.R, p0)
-    assert scaled_rel(est.mean[-1], ob.batch_wls(inp.Z, h8, inp.R, p0)) < 1e-10
+    assert scaled_rel(est.mean[-1], weighted_least_squares(h8, inp.Z, inp.R, p0).mean) < 1e-10
     # Joseph and standard forms agree.
     std = ob.registration_filter(inp.Z, h8, inp.R, p0, form="standard")
     assert scaled_rel(std.mean[-1], est.mean[-1]) < 1e-8
@@ -631,18 +632,19 @@ def test_s1_to_s5_and_s7_monte_carlo_1000_runs(scenario):
     assert np.all(np.asarray(tilt.elevation)[1, :, -1] / DEG > 1.0)
 
 
-def test_monte_carlo_padding_mask(scenario, mc_big):
-    # Runs past num_runs in the last (padded) chunk must not count: runs 60..99 two ways.
-    p14, p8 = ob.prior_cov("aam"), ob.prior_cov("obem")
+def test_monte_carlo_runs_replay_and_padding(scenario, mc_big):
+    # Run i is fold_in(key, i) alone; runs past num_runs in the padded block do not count.
     key = jax.random.key(MC_SEED)
-
-    def sums(start, num_runs):
-        return ob._chunk_sums(scenario, p14, p8, key, jnp.asarray(start), MC_RUNS, jnp.asarray(num_runs))
-
-    full, first60, tail = sums(0, 100), sums(0, 60), sums(60, 100)
-    for a, b, c in zip(jax.tree_util.tree_leaves(full), jax.tree_util.tree_leaves(first60), jax.tree_util.tree_leaves(tail)):
-        np.testing.assert_allclose(a - b, c, rtol=1e-8, atol=1e-8 * float(jnp.max(a)))
-    np.testing.assert_allclose(jnp.sqrt(full.elevation / MC_RUNS), mc_big.elevation, rtol=1e-12)
+    args = ob.RunArgs(scenario, ob.prior_cov("aam"), ob.prior_cov("obem"))
+    runs = [ob.run_squared_errors(jax.random.fold_in(key, i), args) for i in range(3)]
+    three = ob.monte_carlo(scenario, key, 3)  # one block of 4 runs, one padded
+    for name in ("gross_range", "elevation", "azimuth_minus_yaw", "pitch_roll", "position"):
+        total = sum(np.asarray(getattr(r, name)) for r in runs)
+        np.testing.assert_allclose(np.asarray(getattr(three, name)) ** 2 * 3, total, rtol=1e-10)
+    # The first 100 runs' sums are what mc_big's RMSE curves are made of.
+    sums = jax.jit(jax.vmap(ob.run_squared_errors, in_axes=(0, None)))(
+        jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(MC_RUNS)), args)
+    np.testing.assert_allclose(jnp.sqrt(jnp.sum(sums.elevation, axis=0) / MC_RUNS), mc_big.elevation, rtol=1e-12)
 
 
 # ---------------------------------------------------------------------------------------------

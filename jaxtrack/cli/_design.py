@@ -8,7 +8,6 @@ covariance histories.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -40,9 +39,9 @@ def run(args) -> int:
 
     matplotlib.use("Agg")
     import jax.numpy as jnp
-    import matplotlib.pyplot as plt
 
     from ..applications import ho_sensitivity as ho
+    from ..applications._report import write_figures
     from ..covariance import covariance_recursion
     from ..design import local_search, newton_uniform_period, per_step_design, relaxed_segment_design, round_counts
     from ..models import ho_plant
@@ -78,22 +77,9 @@ def run(args) -> int:
         rows.append({"design": "per-step τ_k (optax)", "schedule": [round(float(t), 4) for t in ps.times], "J": ps.cost})
         curves.append(("per-step τ_k", (covariance_recursion(ho_plant(jnp.asarray(ps.taus), g=args.g)), ps.times)))
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(6.8, 4.2), constrained_layout=True)
-    for name, (hist, times) in curves:
-        t = np.repeat(np.asarray(times), 2)
-        p = np.stack([np.asarray(hist.predicted_cov[:, 0, 0]), np.asarray(hist.filtered_cov[:, 0, 0])], axis=1).ravel()
-        ax.plot(t, p, lw=1.0, label=f"{name}: P_T = {float(hist.filtered_cov[-1, 0, 0]):.1f} ft²")
-    ax.set_yscale("log")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("position error variance P(1,1) [ft²]")
-    ax.set_title(f"jaxtrack design {args.method}: {args.g:g} g, {args.samples} samples")
-    ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize=8)
-    figure = out / f"design_{args.method}.png"
-    fig.savefig(figure, dpi=120)
-    plt.close(fig)
+    labelled = [(f"{name}: P_T = {float(hist.filtered_cov[-1, 0, 0]):.1f} ft²", hist, times) for name, (hist, times) in curves]
+    (figure,) = write_figures(args.out, [(f"design_{args.method}.png", lambda: ho.figure_covariance_histories(
+        labelled, f"jaxtrack design {args.method}: {args.g:g} g, {args.samples} samples"))])
 
     if args.json:
         print(json.dumps(rows, indent=2))

@@ -28,6 +28,11 @@ from ._kalman import (
     MeanMap as MeanMap,
     mean_step as mean_step,
 )
+from ._consider import (
+    ConsiderKalmanFilter as ConsiderKalmanFilter,
+    consider_gain as consider_gain,
+    consider_model as consider_model,
+)
 from ._smoother import SmootherResult as SmootherResult, rts_smoother as rts_smoother
 from ._unscented import UnscentedKalmanFilter as UnscentedKalmanFilter
 from ._updates import (

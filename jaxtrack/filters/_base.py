@@ -252,6 +252,29 @@ def _run_filter_jit(filter, model, measurements, observed, first_step, save, thr
     return result
 
 
+def check_run_arguments(filter, model, first_step, save) -> None:
+    """The argument checks every filter entry point makes (raises ``InputError``)."""
+    if first_step not in ("update", "predict"):
+        raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
+    if save not in ("all", "final", "mean"):
+        raise InputError(f"`save` must be 'all', 'final' or 'mean'; got {save!r}.")
+    if not isinstance(filter, AbstractFilter):
+        raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
+    if not isinstance(model, AbstractStateSpaceModel):
+        raise InputError(f"`model` must be a jaxtrack state-space model; got {type(model).__name__}.")
+    filter.check_model(model)
+
+
+def raise_nonfinite_measurements(bad: np.ndarray):
+    """Raise the ``InputError`` for non-finite measurements the mask marks observed (``bad``)."""
+    first = tuple(int(i) for i in np.argwhere(bad)[0])
+    raise InputError(
+        f"`measurements` has {int(bad.sum())} non-finite entries that the mask marks as "
+        f"observed (first at index {first}). Mark them missing with `mask`, or pass "
+        f"nan_as_missing=True to treat NaN as missing."
+    )
+
+
 def prepare_measurements(
     model: AbstractStateSpaceModel,
     measurements: ArrayLike,
@@ -295,12 +318,7 @@ def prepare_measurements(
     elif is_concrete(z):
         bad = np.asarray(~finite & observed)
         if bad.any():
-            first = tuple(int(i) for i in np.argwhere(bad)[0])
-            raise InputError(
-                f"`measurements` has {int(bad.sum())} non-finite entries that the mask marks as "
-                f"observed (first at index {first}). Mark them missing with `mask`, or pass "
-                f"nan_as_missing=True to treat NaN as missing."
-            )
+            raise_nonfinite_measurements(bad)
     if not nan_as_missing:
         # Entries the mask marks missing may hold anything (NaN included): never let them in.
         z = jnp.where(observed, z, 0.0)
@@ -351,14 +369,6 @@ def run_filter(
         result = run_filter(KalmanFilter(), model, zs)
         result.filtered_mean.shape  # (T, 4)
     """
-    if first_step not in ("update", "predict"):
-        raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
-    if save not in ("all", "final", "mean"):
-        raise InputError(f"`save` must be 'all', 'final' or 'mean'; got {save!r}.")
-    if not isinstance(filter, AbstractFilter):
-        raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
-    if not isinstance(model, AbstractStateSpaceModel):
-        raise InputError(f"`model` must be a jaxtrack state-space model; got {type(model).__name__}.")
-    filter.check_model(model)
+    check_run_arguments(filter, model, first_step, save)
     z, observed = prepare_measurements(model, measurements, mask, nan_as_missing)
     return _run_filter_jit(filter, model, z, observed, first_step, save, throw)

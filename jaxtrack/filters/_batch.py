@@ -30,7 +30,15 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._validation import InputError, check_shape, is_concrete
 from ..models import AbstractStateSpaceModel
-from ._base import AbstractFilter, FilterResult, FirstStep, Save, _scan_filter
+from ._base import (
+    AbstractFilter,
+    FilterResult,
+    FirstStep,
+    Save,
+    _scan_filter,
+    check_run_arguments,
+    raise_nonfinite_measurements,
+)
 from ._kalman import MeanMap, mean_step
 from ._linalg import cholesky_and_inverse
 
@@ -511,13 +519,8 @@ def _prepare_batch(model, measurements, mask, nan_as_missing):
         finite = jnp.isfinite(z)
         observed = (observed if observed.ndim == 3 else observed[None]) & finite  # per run now
     elif is_concrete(z) and not bool(_all_observed_finite(z, observed)):
-        bad = np.asarray(~jnp.isfinite(z) & (observed if observed.ndim == 3 else observed[None]))
-        first = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise InputError(
-            f"`measurements` has {int(bad.sum())} non-finite entries that the mask marks "
-            f"as observed (first at index {first}). Mark them missing with `mask`, or pass "
-            f"nan_as_missing=True to treat NaN as missing."
-        )
+        raise_nonfinite_measurements(
+            np.asarray(~jnp.isfinite(z) & (observed if observed.ndim == 3 else observed[None])))
     # Missing entries (NaN included) are zeroed inside the jitted run, fused with its first pass.
     return z, observed
 
@@ -573,15 +576,7 @@ def run_filter_batch(
         res.shared_covariance, res.filtered_mean.shape, res.filtered_cov.shape
         # True, (B, 200, 4), (200, 4, 4)
     """
-    if first_step not in ("update", "predict"):
-        raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
-    if save not in ("all", "final", "mean"):
-        raise InputError(f"`save` must be 'all', 'final' or 'mean'; got {save!r}.")
-    if not isinstance(filter, AbstractFilter):
-        raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
-    if not isinstance(model, AbstractStateSpaceModel):
-        raise InputError(f"`model` must be a jaxtrack state-space model; got {type(model).__name__}.")
-    filter.check_model(model)
+    check_run_arguments(filter, model, first_step, save)
     z, observed = _prepare_batch(model, measurements, mask, nan_as_missing)
     strategy = resolve_covariance(covariance, filter, model, observed.ndim == 2)
     return strategy.run_batch(filter, model, z, observed, first_step, save, throw)

@@ -142,7 +142,12 @@ def condition_linearized(
     PHt = matmul(cov, H.T)
     S = symmetrize(matmul(H, PHt) + R)
     chol, chol_inv = cholesky_and_inverse(S)
-    if gain is None:
+    if gain is None and S.shape[-1] == 1:
+        # A scalar measurement: W = P Hᵀ / S, one division, rounded once (two products with
+        # 1/√S round twice, which matters in ill-conditioned recursions such as bearings-only
+        # pseudo-linear filters, where P and R are scaled by 10⁸).
+        gain = PHt / S[0, 0]
+    elif gain is None:
         # W = P Hᵀ S⁻¹ = (P Hᵀ L⁻ᵀ) L⁻¹ with S = L Lᵀ. Products with L⁻¹ rather than a
         # triangular solve: for small m the factor is written out (no LAPACK call per run
         # under vmap), and a factor shared by a batch stays unbatched.

@@ -26,8 +26,31 @@ from ._frames import (
     rotate as rotate,
     spherical_to_cartesian as spherical_to_cartesian,
 )
+from ._navigation import (
+    antenna_to_body_rotation as antenna_to_body_rotation,
+    body_to_ned_rotation as body_to_ned_rotation,
+    euler_321_perturbation as euler_321_perturbation,
+    euler_error_matrix as euler_error_matrix,
+    heading_to_ned_rotation as heading_to_ned_rotation,
+    ned_to_ecef_rotation as ned_to_ecef_rotation,
+    path_to_heading_rotation as path_to_heading_rotation,
+    psi_from_dcm_error as psi_from_dcm_error,
+    psi_to_euler_error as psi_to_euler_error,
+)
+from ._platform import (
+    cartesian_to_compass_spherical as cartesian_to_compass_spherical,
+    compass_spherical_to_cartesian as compass_spherical_to_cartesian,
+    compass_to_math_azimuth as compass_to_math_azimuth,
+    math_to_compass_azimuth as math_to_compass_azimuth,
+    platform_attitude_error_matrix as platform_attitude_error_matrix,
+    platform_attitude_generators as platform_attitude_generators,
+    platform_rotation_vector as platform_rotation_vector,
+)
+from ._bearing import bearing as bearing, course as course
 from ._rotations import (
     euler_321_to_dcm as euler_321_to_dcm,
+    orthonormalize as orthonormalize,
+    orthonormalize_first_order as orthonormalize_first_order,
     rotation_vector_to_dcm as rotation_vector_to_dcm,
     rotation_x as rotation_x,
     rotation_y as rotation_y,

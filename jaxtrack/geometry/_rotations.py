@@ -94,3 +94,36 @@ def euler_321_to_dcm(angles: ArrayLike) -> Float[Array, "... 3 3"]:
         [sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx],
         [-sy, cy * sx, cy * cx],
     ])
+
+
+def orthonormalize(dcm: ArrayLike) -> Float[Array, "... 3 3"]:
+    """The nearest rotation matrix to ``dcm``: ``C (CᵀC)^{−1/2}`` (Britting; Layne & Blasch 1997, E107).
+
+    The optimal (Frobenius-nearest) orthogonalisation of a direction-cosine matrix that has drifted
+    from orthonormality, by the eigen-decomposition of ``CᵀC``.
+
+    **Arguments:** ``dcm``: shape ``(..., 3, 3)``, non-singular.
+
+    **Returns:** the orthonormal matrix, shape ``(..., 3, 3)``.
+    """
+    from .._validation import check_shape
+
+    C = jnp.asarray(dcm)
+    check_shape("dcm", C, [(3, 3), (None, 3, 3), (None, None, 3, 3)])
+    w, V = jnp.linalg.eigh(jnp.swapaxes(C, -1, -2) @ C)
+    return C @ (V * (1.0 / jnp.sqrt(w))[..., None, :]) @ jnp.swapaxes(V, -1, -2)
+
+
+def orthonormalize_first_order(dcm: ArrayLike, perturbation: ArrayLike) -> Float[Array, "... 3 3"]:
+    """First-order :func:`orthonormalize` of ``C + δC``: ``(I + ½[δC Cᵀ − C δCᵀ]) C`` (Layne & Blasch 1997, E108).
+
+    Exact to first order in ``δC`` when ``C`` is orthonormal (the residual is ``O(‖δC‖²)``).
+
+    **Arguments:** ``dcm`` ``C`` (orthonormal) and ``perturbation`` ``δC``, shape ``(..., 3, 3)``.
+
+    **Returns:** shape ``(..., 3, 3)``.
+    """
+    C, dC = jnp.asarray(dcm), jnp.asarray(perturbation)
+    Ct, dCt = jnp.swapaxes(C, -1, -2), jnp.swapaxes(dC, -1, -2)
+    X = 0.5 * (dC @ Ct - C @ dCt)
+    return (jnp.broadcast_to(jnp.eye(3, dtype=X.dtype), X.shape) + X) @ C

@@ -1,6 +1,7 @@
 """Monte Carlo: simulate truth and measurements, blocks of runs, streaming consistency metrics,
 on one device or sharded over devices and hosts."""
 
+from ._cep import circular_error_probable as circular_error_probable
 from ._engine import monte_carlo_map as monte_carlo_map
 from ._metrics import (
     chi2_mean_bounds as chi2_mean_bounds,

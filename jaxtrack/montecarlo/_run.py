@@ -1,8 +1,10 @@
 """The Monte Carlo harness: blocks of runs, fused simulate-filter-score scans, streaming sums.
 
 Follow one run from the top: :func:`monte_carlo` validates its inputs and dispatches blocks of
-runs (a fixed, compiled size that does not depend on ``chunk_size``) with a progress bar; each
-block is one call of the jitted :func:`_block_sums`, whose ``lax.scan`` over steps draws the
+runs (a fixed, compiled size that does not depend on ``chunk_size``) to the one Monte Carlo
+engine (:func:`~jaxtrack.montecarlo._engine.run_blocks`: run ``i`` from ``fold_in(key, i)``,
+blocks accumulated in order, mesh sharding, progress bar); each block is one call of
+:func:`_block_delta`, whose ``lax.scan`` over steps draws the
 truth and the measurement (the draws of :func:`~jaxtrack.montecarlo.simulate`), updates the
 filter and adds the step's error, NEES and NIS, summed over the block's runs, to the running
 totals. Nothing per run is kept, so memory does not grow with the number of runs or steps.
@@ -16,12 +18,11 @@ Two paths, chosen automatically (``covariance="auto"``):
   the estimates, as ``(n, block)`` matrices.
 - **per-run covariance**: any other filter (EKF, UKF) or filter model. Each step ``vmap``s the
   fused per-run step: :func:`~jaxtrack.montecarlo.simulate_step` and
-  :func:`~jaxtrack.filters.filter_step`.
+  :meth:`~jaxtrack.filters.AbstractFilter.step`.
 """
 
 from __future__ import annotations
 
-import math
 import warnings
 from typing import Any, Callable, NamedTuple, Sequence
 
@@ -29,19 +30,19 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, PartitionSpec as P
+from jax.sharding import Mesh
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
-from tqdm.auto import tqdm
 
 from .._validation import InputError, check_shape
-from ..filters import AbstractFilter, FilterState, KalmanFilter, mean_step
+from ..filters import AbstractFilter, KalmanFilter, mean_step
 from ..filters._base import FirstStep
 from ..filters._batch import CovarianceMode, mean_maps, resolve_covariance, shared_covariances
 from ..filters._linalg import all_rows, cholesky_and_inverse, matmul, sum_rows
-from ..models import AbstractStateSpaceModel, at_step
+from ..models import AbstractStateSpaceModel
 from ._metrics import chi2_mean_bounds, normalized_squared_error
 from ._noise import key_words, step_normals
-from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size, local_value, place
+from ._engine import block_size_for, check_mesh, run_blocks
+from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
 from ._simulate import (
     _resolve_num_steps,
     advance,
@@ -121,10 +122,6 @@ _SHARED_BLOCK = 2048  # shared covariance: (n, block) state, wide element-wise l
 _PER_RUN_BLOCK = 512  # per-run covariance: (block, n, n) carries stay in cache
 
 
-def _block_size(num_runs: int, largest: int) -> int:
-    return min(largest, 1 << max(0, (num_runs - 1).bit_length()))
-
-
 class _StepSums(NamedTuple):
     """One step's sums over the runs of a block (an entry of the scan's per-step output)."""
 
@@ -174,7 +171,6 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, k
     """
     block = use.shape[0]
     x0, eps0, truth_step = _simulated_block(truth, factors, first_step, key, start, block)
-    dtype = filter_model.initial_cov.dtype
 
     def one(filt, x, z, k, obs):
         filt, (_, _, post) = filter.step(filter_model, filt, z, obs, first_step=first_step)
@@ -259,16 +255,35 @@ def _shared_setup(filter, filter_model, truth, observed, first_step):
     return factors, cov, maps, nees_factor
 
 
-def _block_delta(start, num_runs, key, filter, filter_model, truth, observed, first_step, block, setup) -> _Sums:
-    """The sums of one block of runs ``start … start+block−1`` (those below ``num_runs``).
+class _Common(eqx.Module):
+    """What every block and every swept value share: the filter, the schedule, the prior's place."""
 
-    The per-step sums are accumulated inside the scan, so nothing per run is kept. A run that
-    turns non-finite is excluded from the statistics: if any did, the block is run again with
-    those runs masked out (same draws), which costs nothing in the usual case. The block is a
-    pure function of its start index and the key, so where it runs (which device, which host)
-    cannot change it.
+    filter: AbstractFilter
+    observed: Array  # (T, m)
+    first_step: str = eqx.field(static=True)
+
+
+class _Models(eqx.Module):
+    """What one Monte Carlo (one value of a sweep) runs: the truth, the filter's model and, on the
+    shared-covariance path, what :func:`_shared_setup` computed once (None on the per-run path)."""
+
+    truth: AbstractStateSpaceModel
+    filter_model: AbstractStateSpaceModel
+    setup: Any = None
+
+
+def _block_delta(common: _Common, models: _Models, key, start, valid) -> _Sums:
+    """The sums of one block of runs ``start … start+block−1`` (those where ``valid``).
+
+    The block function handed to :func:`~jaxtrack.montecarlo._engine.run_blocks`. The per-step
+    sums are accumulated inside the scan, so nothing per run is kept. A run that turns
+    non-finite is excluded from the statistics: if any did, the block is run again with those
+    runs masked out (same draws), which costs nothing in the usual case. The block is a pure
+    function of its start index and the key, so where it runs (which device, which host) cannot
+    change it.
     """
-    valid = start + jnp.arange(block) < num_runs
+    filter, observed, first_step = common.filter, common.observed, common.first_step
+    truth, filter_model, setup = models.truth, models.filter_model, models.setup
     if setup is None:
         factors = noise_factors(truth, observed.shape[0])
         run = lambda use: _per_run_block(  # noqa: E731
@@ -282,67 +297,6 @@ def _block_delta(start, num_runs, key, filter, filter_model, truth, observed, fi
     step_sums = jax.lax.cond(jnp.all(ok | ~valid), lambda: step_sums, lambda: run(use)[0])
     w = use.astype(step_sums.nees.dtype)
     return _Sums(*step_sums, jnp.sum(w), jnp.sum((valid & ~ok).astype(w.dtype)))
-
-
-def _add_sums(sums: _Sums, delta: _Sums) -> _Sums:
-    """Running totals plus one block's sums. Blocks are always added in block order, one at a
-    time, whatever the number of devices: the totals are then the same to the last bit."""
-    return _Sums(*(a + b for a, b in zip(sums, delta)))
-
-
-@eqx.filter_jit
-def _block_sums(sums, start, num_runs, key, filter, filter_model, truth, observed, first_step, block, setup):
-    """Add one block of runs to ``sums`` (one device)."""
-    delta = _block_delta(start, num_runs, key, filter, filter_model, truth, observed, first_step, block, setup)
-    return _add_sums(sums, delta)
-
-
-def _sharded_round(sums, start, num_runs, key, filter, filter_model, truth, observed, first_step, block, setup,
-                   mesh, axis):
-    """One round on a mesh: device ``d`` along ``axis`` runs block ``start/block + d``; the
-    blocks' sums are then added to ``sums`` one at a time in block order (see :mod:`._sharding`)."""
-    return _sweep_round(sums, start, num_runs, key, filter, (truth, filter_model), observed, first_step, block,
-                        setup, mesh, axis, None)
-
-
-@eqx.filter_jit
-def _sweep_round(sums, start, num_runs, key, filter, models, observed, first_step, block, setup, mesh,
-                 run_axis, sweep_axis):
-    """One round of blocks on a mesh, for one model pair or a sweep of them.
-
-    ``sweep_axis`` None: ``models = (truth, filter_model)`` and ``setup`` are one value.
-    Otherwise every array leaf of ``models``, ``setup`` and ``sums`` has a leading axis over the
-    parameter values, sharded along ``sweep_axis`` (when the mesh has it); each device loops over
-    its values with ``lax.map``, so every value runs exactly the block program of
-    :func:`monte_carlo`. Device ``d`` along ``run_axis`` takes block ``start/block + d``.
-    """
-    common_dyn, common_static = eqx.partition((key, filter, observed), eqx.is_array)
-    value_dyn, value_static = eqx.partition((models, setup), eqx.is_array)
-    has_run_axis = run_axis in mesh.axis_names
-    num_dev = axis_size(mesh, run_axis)
-
-    def per_device(start, num_runs, common_dyn, value_dyn):
-        key, filter, observed = eqx.combine(common_dyn, common_static)
-        block_start = start + (jax.lax.axis_index(run_axis) * block if has_run_axis else 0)
-
-        def one(value):
-            (truth, filter_model), setup = eqx.combine(value, value_static)
-            return _block_delta(block_start, num_runs, key, filter, filter_model, truth, observed, first_step,
-                                block, setup)
-
-        delta = one(value_dyn) if sweep_axis is None else jax.lax.map(one, value_dyn)
-        return jax.tree_util.tree_map(lambda a: a[None], delta)
-
-    value_spec = P(sweep_axis) if sweep_axis in mesh.axis_names else P()
-    out_spec = P(run_axis if has_run_axis else None, *((sweep_axis,) if value_spec != P() else ()))
-    # check_vma=False: the block code is shared with the single-device path and has no
-    # device-varying annotations (its scans would need pcast); the outputs are declared above.
-    deltas = jax.shard_map(
-        per_device, mesh=mesh, in_specs=(P(), P(), P(), value_spec), out_specs=out_spec, check_vma=False
-    )(start, num_runs, common_dyn, value_dyn)
-    for d in range(num_dev):
-        sums = _add_sums(sums, jax.tree_util.tree_map(lambda a: a[d], deltas))
-    return sums
 
 
 class _Prepared(NamedTuple):
@@ -388,38 +342,13 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
         observed = jnp.broadcast_to(mask[:, None] if mask.ndim == 1 else mask, (num_steps, m))
 
     shared = resolve_covariance(covariance, filter, filter_model, True).shared
-    block = _block_size(num_runs, _SHARED_BLOCK if shared else _PER_RUN_BLOCK)
+    block = block_size_for(num_runs, _SHARED_BLOCK if shared else _PER_RUN_BLOCK)
     return _Prepared(filter, filter_model, num_steps, observed, shared, block)
-
-
-def _check_mesh(mesh, axes):
-    if not isinstance(mesh, Mesh):
-        raise InputError(f"`mesh` must be a jax.sharding.Mesh (see jaxtrack.montecarlo.run_mesh); got {type(mesh).__name__}.")
-    if not any(a in mesh.axis_names for a in axes if a is not None):
-        raise InputError(f"`mesh` has axes {mesh.axis_names}; it needs at least one of {tuple(a for a in axes if a)}.")
 
 
 def _zero_sums(num_steps, n, dtype, lead=()):
     z = lambda *shape: jnp.zeros(lead + shape, dtype)  # noqa: E731
     return _Sums(z(num_steps, n), z(num_steps, n), z(num_steps), z(num_steps), z(num_steps), z(), z())
-
-
-def _round_loop(step, num_runs, block, per_round, chunk_size, progress, sums, desc="Monte Carlo"):
-    """Dispatch rounds of ``per_round`` blocks; wait once per chunk so that the bar reports
-    finished runs (blocks are dispatched asynchronously)."""
-    runs_per_round = per_round * block
-    rounds_per_chunk = max(1, round(chunk_size / runs_per_round))
-    num_rounds = math.ceil(num_runs / runs_per_round)
-    with tqdm(total=num_runs, desc=desc, unit="run", disable=not progress) as bar:
-        done = 0
-        for r in range(num_rounds):
-            sums = step(sums, r * runs_per_round)
-            if (r + 1) % rounds_per_chunk == 0 or r + 1 == num_rounds:
-                sums = jax.block_until_ready(sums)
-                finished = min((r + 1) * runs_per_round, num_runs)
-                bar.update(finished - done)
-                done = finished
-    return sums
 
 
 def monte_carlo(
@@ -488,27 +417,15 @@ def monte_carlo(
     prep = _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance)
     filter, filter_model, num_steps, observed, shared, block = prep
     setup = _shared_setup(filter, filter_model, truth, observed, first_step) if shared else None
+    if mesh is not None:
+        check_mesh(mesh, (mesh_axis,))
     n = truth.state_dim
-    sums = _zero_sums(num_steps, n, filter_model.initial_cov.dtype)
-    total = jnp.asarray(num_runs)
-    if mesh is None:
-        def step(sums, start):
-            return _block_sums(sums, jnp.asarray(start), total, key, filter, filter_model, truth, observed,
-                               first_step, block, setup)
-
-        per_round = 1
-    else:
-        _check_mesh(mesh, (mesh_axis,))
-        per_round = axis_size(mesh, mesh_axis)
-        sums, total, key, filter, filter_model, truth, observed, setup = place(
-            (sums, total, key, filter, filter_model, truth, observed, setup), mesh)
-
-        def step(sums, start):
-            return _sharded_round(sums, place(jnp.asarray(start), mesh), total, key, filter, filter_model, truth,
-                                  observed, first_step, block, setup, mesh, mesh_axis)
-
-    sums = _round_loop(step, num_runs, block, per_round, chunk_size, progress, sums)
-    return _summarize(local_value(sums), prep.observed, n, confidence, shared)
+    sums = run_blocks(
+        _block_delta, _zero_sums(num_steps, n, filter_model.initial_cov.dtype),
+        common=_Common(filter, observed, first_step), value=_Models(truth, filter_model, setup), key=key,
+        num_runs=num_runs, block=block, mesh=mesh, run_axis=mesh_axis, chunk_size=chunk_size,
+        progress=progress, desc="Monte Carlo")
+    return _summarize(sums, observed, n, confidence, shared)
 
 
 def monte_carlo_sweep(
@@ -586,27 +503,23 @@ def monte_carlo_sweep(
     setups = [_shared_setup(filter, fm, t, observed, first_step) if shared else None for t, fm in pairs]
 
     mesh = Mesh(np.asarray(jax.devices()[:1]), (run_axis,)) if mesh is None else mesh
-    _check_mesh(mesh, (sweep_axis, run_axis))
+    check_mesh(mesh, (sweep_axis, run_axis))
     num_values = len(values)
     share = axis_size(mesh, sweep_axis)
     padded = -(-num_values // share) * share
     # Padding repeats the last value; its results are dropped.
-    stack = lambda *xs: jnp.stack(xs)  # noqa: E731
-    batch = jax.tree_util.tree_map(stack, *(list(zip(pairs, setups)) + [(pairs[-1], setups[-1])] * (padded - num_values)))
-    models_b, setup_b = batch
+    per_value = [_Models(t, fm, su) for (t, fm), su in zip(pairs, setups)]
+    per_value += [per_value[-1]] * (padded - num_values)
+    dyn, static = eqx.partition(per_value[0], eqx.is_array)
+    stacked = eqx.combine(
+        jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *(eqx.partition(v, eqx.is_array)[0] for v in per_value)),
+        static)
     n = pairs[0][0].state_dim
-    sums = _zero_sums(prep.num_steps, n, prep.filter_model.initial_cov.dtype, (padded,))
-    value_spec = P(sweep_axis) if sweep_axis in mesh.axis_names else P()
-    sums, models_b, setup_b = place((sums, models_b, setup_b), mesh, value_spec)
-    total, key, filter, observed = place((jnp.asarray(num_runs), key, filter, observed), mesh)
-
-    def step(sums, start):
-        return _sweep_round(sums, place(jnp.asarray(start), mesh), total, key, filter, models_b, observed,
-                            first_step, block, setup_b, mesh, run_axis, sweep_axis)
-
-    per_round = axis_size(mesh, run_axis)
-    sums = _round_loop(step, num_runs, block, per_round, chunk_size, progress, sums, desc="Monte Carlo sweep")
-    sums = local_value(sums)
+    sums = run_blocks(
+        _block_delta, _zero_sums(prep.num_steps, n, prep.filter_model.initial_cov.dtype, (padded,)),
+        common=_Common(filter, observed, first_step), value=stacked, key=key, num_runs=num_runs,
+        block=block, mesh=mesh, run_axis=run_axis, sweep_axis=sweep_axis, chunk_size=chunk_size,
+        progress=progress, desc="Monte Carlo sweep")
     return [
         _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), prep.observed, n, confidence, shared)
         for j in range(num_values)

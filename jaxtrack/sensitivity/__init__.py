@@ -2,14 +2,17 @@
 
 - ``_variations``: exact (all-order) one-stage variation equations, eqs. (17)–(30), App. B.
 - ``_recursions``: first-order analysis: local variations (31), error-transition matrices
-  (34)–(35), multistage variations (36)–(37), adjoint matrices (42)–(43), scalar-parameter
-  sensitivity (46)–(48), time-fixed correction (50), sensitivity indices (51)–(54); every
-  analytic function has an autodiff counterpart with the same inputs and outputs.
+  (34)–(35), multistage variations (36)–(37), adjoint matrices (42)–(43), the forward tangent
+  recursion (46)–(48), and the ``Analytic``/``Autodiff`` method strategies.
+- ``_indices``: sensitivity matrices of a parameter α (46)–(48), time-fixed correction (50),
+  sensitivity indices (51)–(54) and Ho's segment indices; every analytic function has an
+  autodiff counterpart with the same inputs and outputs.
 - ``_gain``: second-order gain variation about the optimum, eqs. (55)–(64).
 - ``_one_stage``: Sec. IV one-stage closed forms (99)–(134) and the App. C normalisation.
 """
 
 from ._gain import *  # noqa: F401,F403
+from ._indices import *  # noqa: F401,F403
 from ._one_stage import *  # noqa: F401,F403
 from ._recursions import *  # noqa: F401,F403
 from ._variations import *  # noqa: F401,F403
