@@ -25,8 +25,8 @@ TYPECHECKED = [
     "jaxtrack.estimation",
     "jaxtrack.montecarlo._metrics",
     "jaxtrack.montecarlo._cep",
-    "jaxtrack.models._ins",
-    "jaxtrack.applications",
+    "jaxtrack.applications.bearings_tma",
+    "jaxtrack.applications.ho_sensitivity",
 ]
 if os.environ.get("JAXTRACK_TYPECHECK", "1") != "0":
     with install_import_hook(TYPECHECKED, "beartype.beartype"):
