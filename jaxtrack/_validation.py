@@ -21,7 +21,14 @@ class InputError(ValueError):
 
 
 def is_concrete(x) -> bool:
-    """True when ``x`` holds a value that can be inspected now (not a tracer)."""
+    """True when ``x`` holds a value that can be inspected now (not a tracer).
+
+    **Arguments:**
+
+    - ``x``: any value (array, tracer or Python object).
+
+    **Returns:** a Python bool.
+    """
     return not isinstance(x, jax.core.Tracer)
 
 
@@ -30,7 +37,17 @@ def _describe_shape(shape: Sequence[int | None]) -> str:
 
 
 def check_shape(name: str, x, shapes: Sequence[Sequence[int | None]]) -> None:
-    """Raise unless ``x.shape`` matches one of ``shapes`` (``None`` matches any size)."""
+    """Raise unless ``x.shape`` matches one of ``shapes`` (``None`` matches any size).
+
+    **Arguments:**
+
+    - ``name``: the argument's name, for the message; ``x``: the array (anything with a shape).
+    - ``shapes``: the allowed shapes, each a sequence of sizes or ``None``.
+
+    **Returns:** ``None``.
+
+    **Raises:** ``InputError`` if no shape matches.
+    """
     actual = tuple(jnp.shape(x))
     for shape in shapes:
         if len(shape) == len(actual) and all(s is None or s == a for s, a in zip(shape, actual)):
@@ -40,7 +57,16 @@ def check_shape(name: str, x, shapes: Sequence[Sequence[int | None]]) -> None:
 
 
 def check_finite(name: str, x) -> None:
-    """Raise if a concrete ``x`` has a NaN or infinite entry."""
+    """Raise if a concrete ``x`` has a NaN or infinite entry.
+
+    **Arguments:**
+
+    - ``name``: the argument's name, for the message; ``x``: the array, any shape (tracers are skipped).
+
+    **Returns:** ``None``.
+
+    **Raises:** ``InputError`` naming the count and the first non-finite entry.
+    """
     if not is_concrete(x):
         return
     arr = np.asarray(x)
@@ -63,7 +89,18 @@ def _matrix_label(x, i) -> str:
 
 
 def check_symmetric(name: str, x, rtol: float = 1e-8) -> None:
-    """Raise if a concrete matrix (or stack of matrices) is not symmetric to ``rtol``."""
+    """Raise if a concrete matrix (or stack of matrices) is not symmetric to ``rtol``.
+
+    **Arguments:**
+
+    - ``name``: the argument's name, for the message.
+    - ``x``: a matrix ``(d, d)`` or stack ``(..., d, d)`` (tracers are skipped).
+    - ``rtol``: the tolerance on ``max|A − Aᵀ|`` relative to ``max|A|``.
+
+    **Returns:** ``None``.
+
+    **Raises:** ``InputError`` naming the first asymmetric matrix.
+    """
     if not is_concrete(x):
         return
     stack = _last_two(x)
@@ -89,6 +126,16 @@ def check_covariance(name: str, x, *, definite: bool = True) -> None:
     ``definite=False`` accepts singular covariances (e.g. a plant noise acting on one state only)
     but rejects eigenvalues below ``-1e-10`` (correlation form) or ``-1e-10·max|A|``. Stacks are
     checked in batched eigendecompositions, so a per-step model of many steps validates quickly.
+
+    **Arguments:**
+
+    - ``name``: the argument's name, for the message.
+    - ``x``: a matrix ``(d, d)`` or stack ``(..., d, d)``, in any units (tracers skip the value checks).
+    - ``definite``: require positive definite (default) or only positive semidefinite.
+
+    **Returns:** ``None``.
+
+    **Raises:** ``InputError`` for a non-finite, asymmetric or not positive (semi)definite matrix.
     """
     check_finite(name, x)
     check_symmetric(name, x)

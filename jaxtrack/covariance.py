@@ -126,8 +126,17 @@ def actual_covariance(
     filter also knows; a filter whose Φ differs from the truth needs an augmented (truth, error)
     covariance, which this function does not compute.
 
+    **Arguments:**
+
+    - ``true_model``: the truth, a :class:`~jaxtrack.models.LinearGaussianModel` (``P_{0/-1}``, ``Q``, ``R``).
+    - ``filter_model``: the filter's assumed model (``P*_{0/-1}``, ``Q*``, ``R*``), same ``F`` and ``H``.
+    - ``num_steps``, ``mask``, ``first_step``: as in :func:`covariance_recursion` (``mask`` ``(T,)`` or
+      ``(T, m)``).
+
     **Returns:** ``(computed, actual)``, two :class:`CovarianceHistory`; ``actual.gain`` equals
     ``computed.gain``.
+
+    **Raises:** ``InputError`` if the models do not share ``F`` and ``H``.
     """
     for name in ("F", "H"):
         a, b = getattr(true_model, name), getattr(filter_model, name)
@@ -147,7 +156,15 @@ def actual_covariance(
 
 
 def second_order_term(fn, x: Array, B: Array) -> Array:
-    """``(f_xx ∘ B)^{(i)} = Σ_{j,k} ∂²f^{(i)}/∂x_j∂x_k · B_{jk}`` (Ho 1968, eq. (A.6)), by ``jax.hessian``."""
+    """``(f_xx ∘ B)^{(i)} = Σ_{j,k} ∂²f^{(i)}/∂x_j∂x_k · B_{jk}`` (Ho 1968, eq. (A.6)), by ``jax.hessian``.
+
+    **Arguments:**
+
+    - ``fn``: ``f``, a function ``(n,) -> (p,)``.
+    - ``x``: the point, ``(n,)``; ``B``: the matrix, ``(n, n)``.
+
+    **Returns:** ``(f_xx ∘ B)``, shape ``(p,)``.
+    """
     hess = jax.hessian(fn)(x)
     return jnp.einsum("ijk,jk->i", hess, B)
 
@@ -183,6 +200,14 @@ def updated_error_mean(
             − ½ W h_{xx} ∘ [P_{k/k-1} + \bar{x̃}_{k/k-1}\bar{x̃}_{k/k-1}ᵀ]
 
     with ``h_x``, ``h_xx`` at the prediction ``x̂_{k/k-1}`` (``estimate``); ``gain`` is ``W`` ``(n, m)``.
+
+    **Arguments:**
+
+    - ``model``: the state-space model (its ``measurement(x, k)`` is ``h``).
+    - ``error_mean``: ``x̄̃_{k/k-1}``, ``(n,)``; ``cov``: ``P_{k/k-1}``, ``(n, n)``.
+    - ``estimate``: ``x̂_{k/k-1}``, ``(n,)``; ``gain``: ``W``, ``(n, m)``; ``k``: the step index.
+
+    **Returns:** ``x̄̃_{k/k}``, shape ``(n,)``, in the state's units.
     """
     fn = lambda x: model.measurement(x, k)  # noqa: E731
     H = jax.jacfwd(fn)(estimate)

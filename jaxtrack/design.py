@@ -212,7 +212,15 @@ def ho_reduction(problem: SegmentProblem, counts: Sequence[int], remove: int, *,
     """The memo's use of III-B in its example: remove ``remove`` samples from the segments with the
     lowest time-fixed ``s_i``, at most ``cap·n_i`` from each (Sec. III-E: (10,…) → (10,5,5,10,10)).
 
+    **Arguments:**
+
+    - ``problem``: the :class:`SegmentProblem`; ``counts``: the current scheme ``(n_1, …, n_S)``.
+    - ``remove``: how many samples to remove in all.
+    - ``cap``: the largest fraction of a segment's samples that may be removed (default 0.5).
+
     **Returns:** the new counts.
+
+    **Raises:** ``InputError`` if ``remove`` would empty a segment or the cap does not allow it.
     """
     counts = list(problem.check(counts))
     if not 0 <= remove < sum(counts) - len(counts) + 1:
@@ -248,7 +256,16 @@ def segment_exchange(
     coincides only when all ``τ_i²/D_i`` are equal. A move is kept only if ``J`` falls; the
     algorithm stops when no move helps.
 
+    **Arguments:**
+
+    - ``problem``: the :class:`SegmentProblem`; ``counts``: the starting scheme ``(n_1, …, n_S)``.
+    - ``max_relative_change``: the bound ``c`` on ``|Δτ_i|/τ_i`` of (73) (default 0.25).
+    - ``condition``: ``"count-gradient"`` (default) or ``"equal-s"``, as above.
+    - ``max_iter``: the most passes.
+
     **Returns:** ``(counts, costs)`` — the final scheme and ``J`` after each accepted move.
+
+    **Raises:** ``InputError`` for an unknown ``condition``.
     """
     counts = list(problem.check(counts))
     costs = [problem.cost(counts)]
@@ -292,7 +309,16 @@ def _compositions(total: int, parts: int, lo: int, hi: int) -> np.ndarray:
 
 def exhaustive_counts(problem: SegmentProblem, total: int, *, lo: int = 1, hi: int | None = None, chunk: int = 4096) -> tuple[tuple[int, ...], float, int]:
     """Brute-force integer optimum: ``J`` of every scheme with ``Σn_i = total``, ``lo ≤ n_i ≤ hi``,
-    evaluated in vmapped chunks. **Returns:** ``(counts, J, number_of_schemes)``."""
+    evaluated in vmapped chunks. **Returns:** ``(counts, J, number_of_schemes)``.
+
+    **Arguments:**
+
+    - ``problem``: the :class:`SegmentProblem`; ``total``: ``Σn_i``.
+    - ``lo``, ``hi``: the bounds on each ``n_i`` (``hi`` defaults to ``total``).
+    - ``chunk``: schemes per vmapped evaluation.
+
+    **Raises:** ``InputError`` if no scheme satisfies the bounds.
+    """
     hi = total if hi is None else hi
     schemes = _compositions(total, problem.num_segments, lo, hi)
     if len(schemes) == 0:
@@ -383,7 +409,17 @@ def relaxed_segment_design(
     without the cap ``hi``: samples pile into the last segment (spec §5.5). Round the result with
     :func:`round_counts` and polish it with :func:`local_search`.
 
+    **Arguments:**
+
+    - ``problem``: the :class:`SegmentProblem`; ``total``: ``Σn_i``.
+    - ``lo``, ``hi``: the bounds on each ``n_i``.
+    - ``objective``: ``"terminal"`` (default) or ``"running"``.
+    - ``steps``, ``learning_rate``: the Adam iterations and step size.
+    - ``init``: optional starting counts ``(S,)`` (default: ``total/S`` each).
+
     **Returns:** :class:`RelaxedDesign`.
+
+    **Raises:** ``InputError`` for an infeasible ``total`` or an unknown ``objective``.
     """
     S = problem.num_segments
     if not S * lo <= total <= S * hi:
@@ -417,7 +453,15 @@ def _relaxed_run(problem, x0, total, lo, hi, objective, steps, learning_rate):
 
 
 def round_counts(counts: ArrayLike, total: int, lo: int = 1, hi: int | None = None) -> tuple[int, ...]:
-    """Largest-remainder rounding of continuous counts to integers with ``Σ = total`` within [lo, hi]."""
+    """Largest-remainder rounding of continuous counts to integers with ``Σ = total`` within [lo, hi].
+
+    **Arguments:**
+
+    - ``counts``: continuous counts, shape ``(S,)``.
+    - ``total``: the required sum; ``lo``, ``hi``: the bounds on each count (``hi`` defaults to ``total``).
+
+    **Returns:** the integer counts, a tuple of ``S`` ints.
+    """
     x = np.asarray(counts, float)
     hi = total if hi is None else hi
     base = np.clip(np.floor(x), lo, hi).astype(int)
@@ -439,6 +483,12 @@ def round_counts(counts: ArrayLike, total: int, lo: int = 1, hi: int | None = No
 
 def local_search(problem: SegmentProblem, counts: Sequence[int], *, lo: int = 1, hi: int | None = None, max_iter: int = 100) -> tuple[tuple[int, ...], float]:
     """Integer polish: move one sample between any two segments while ``J`` falls (best move first).
+
+    **Arguments:**
+
+    - ``problem``: the :class:`SegmentProblem`; ``counts``: the starting scheme ``(n_1, …, n_S)``.
+    - ``lo``, ``hi``: the bounds on each ``n_i`` (``hi`` defaults to ``Σn_i``).
+    - ``max_iter``: the most moves.
 
     **Returns:** ``(counts, J)`` at a 1-exchange local optimum.
     """
@@ -610,6 +660,15 @@ def maneuver_period_change(
     with the acceleration-noise level ``a``; the indices are run with zero initial sensitivities
     at ``k`` (the memo's "zero initial values"). ``time_fixed=True`` adds the correction (50)
     with ``k = m`` to ``∂J/∂τ``. ``m = 1`` is eq. (79).
+
+    **Arguments:**
+
+    - ``model_fn``: ``(τ, a) -> LinearGaussianModel``, the ``m``-stage model described above.
+    - ``tau``: the sampling period ``τ`` (s); ``a``: the acceleration-noise level.
+    - ``delta_a``: the increase ``Δa`` (units of ``a``).
+    - ``weight``: ``L``, ``(n, n)``; ``J = tr(L P)``.
+    - ``time_fixed``: add the time-fixed correction (50).
+    - ``method``: the sensitivity method, ``Analytic()`` (default) or ``Autodiff()``.
 
     **Returns:** :class:`ManeuverCompensation`.
     """

@@ -21,8 +21,8 @@ def test_compass_spherical_to_cartesian_closed_form():
     expected = np.stack([r * np.sin(th) * np.cos(el), r * np.cos(th) * np.cos(el), r * np.sin(el)], -1)
     np.testing.assert_allclose(geometry.compass_spherical_to_cartesian(polar), expected, rtol=1e-12, atol=1e-9)
     # North is θ = 0, East is θ = 90°.
-    np.testing.assert_allclose(geometry.compass_spherical_to_cartesian([2.0, 0.0, 0.0]), [0.0, 2.0, 0.0], atol=1e-15)
-    np.testing.assert_allclose(geometry.compass_spherical_to_cartesian([2.0, 90 * DEG, 0.0]), [2.0, 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(geometry.compass_spherical_to_cartesian(np.array([2.0, 0.0, 0.0])), [0.0, 2.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(geometry.compass_spherical_to_cartesian(np.array([2.0, 90 * DEG, 0.0])), [2.0, 0.0, 0.0], atol=1e-15)
 
 
 def test_cartesian_to_compass_spherical_round_trip_and_range():

@@ -35,11 +35,27 @@ class PaperRow:
 
 
 def printed_rtol(paper: float, last_digit: float, floor: float = 5e-3) -> float:
-    """Tolerance for a number printed to ``last_digit`` (e.g. 0.01): ``max(floor, ½·last_digit/|paper|)``."""
+    """Tolerance for a number printed to ``last_digit`` (e.g. 0.01): ``max(floor, ½·last_digit/|paper|)``.
+
+    **Arguments:**
+
+    - ``paper``: the printed value (non-zero); ``last_digit``: the place value of its last printed
+      digit; ``floor``: the smallest tolerance returned (default 5e-3).
+
+    **Returns:** the relative tolerance, a Python float.
+    """
     return max(floor, 0.5 * last_digit / abs(paper))
 
 
 def format_rows(rows: list[PaperRow], title: str) -> str:
+    """A plain-text table of reproduced numbers, one line per row, and a pass count.
+
+    **Arguments:**
+
+    - ``rows``: the :class:`PaperRow` entries; ``title``: the first line.
+
+    **Returns:** the table, a str.
+    """
     head = f"{'id':<5} {'quantity':<72} {'paper':>11} {'jaxtrack':>12} {'rtol':>7}  ok"
     lines = [title, head, "-" * len(head)]
     for r in rows:
@@ -54,7 +70,15 @@ def format_rows(rows: list[PaperRow], title: str) -> str:
 
 def write_figures(out_dir, makers, dpi: int = 120) -> list[str]:
     """Build each figure with its maker and save it as PNG: ``makers`` is ``[(file_name, make), …]``
-    with ``make() -> matplotlib Figure``. Creates ``out_dir``; returns the written paths."""
+    with ``make() -> matplotlib Figure``. Creates ``out_dir``; returns the written paths.
+
+    **Arguments:**
+
+    - ``out_dir``: the output directory (str or path), created if missing.
+    - ``makers``: ``[(file_name, make), …]``; ``dpi``: the PNG resolution (default 120).
+
+    **Returns:** the written file paths, a list of str.
+    """
     from pathlib import Path
 
     import matplotlib.pyplot as plt

@@ -253,7 +253,16 @@ def _run_filter_jit(filter, model, measurements, observed, first_step, save, thr
 
 
 def check_run_arguments(filter, model, first_step, save) -> None:
-    """The argument checks every filter entry point makes (raises ``InputError``)."""
+    """The argument checks every filter entry point makes (raises ``InputError``).
+
+    **Arguments:**
+
+    - ``filter``: the filter strategy; ``model``: the state-space model.
+    - ``first_step``: must be ``"update"`` or ``"predict"``; ``save``: must be ``"all"``, ``"final"`` or
+      ``"mean"``.
+
+    **Returns:** ``None``.
+    """
     if first_step not in ("update", "predict"):
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
     if save not in ("all", "final", "mean"):
@@ -266,7 +275,14 @@ def check_run_arguments(filter, model, first_step, save) -> None:
 
 
 def raise_nonfinite_measurements(bad: np.ndarray):
-    """Raise the ``InputError`` for non-finite measurements the mask marks observed (``bad``)."""
+    """Raise the ``InputError`` for non-finite measurements the mask marks observed (``bad``).
+
+    **Arguments:**
+
+    - ``bad``: boolean NumPy ``(T, m)``, True at observed non-finite entries (at least one).
+
+    **Returns:** never; always raises ``InputError``.
+    """
     first = tuple(int(i) for i in np.argwhere(bad)[0])
     raise InputError(
         f"`measurements` has {int(bad.sum())} non-finite entries that the mask marks as "
@@ -285,6 +301,19 @@ def prepare_measurements(
 
     NaN entries are accepted only when ``nan_as_missing`` is True; they are then marked missing
     and replaced by 0 so that they cannot reach the arithmetic.
+
+    **Arguments:**
+
+    - ``model``: the state-space model.
+    - ``measurements``: shape ``(T, m)`` (or ``(T,)`` when ``m = 1``), in the model's units.
+    - ``mask``: optional boolean, ``(T,)`` or ``(T, m)``; True means observed.
+    - ``nan_as_missing``: treat NaN measurements as missing.
+
+    **Returns:** ``(measurements, observed)``: floats ``(T, m)`` with missing entries 0, and booleans
+    ``(T, m)``.
+
+    **Raises:** ``InputError`` for wrong shapes, a step count that disagrees with the model's, a mask
+    that is not boolean, or (concrete) non-finite observed measurements.
     """
     z = jnp.asarray(measurements)
     if not jnp.issubdtype(z.dtype, jnp.floating):

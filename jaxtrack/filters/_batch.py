@@ -133,6 +133,15 @@ def covariance_pass(filter: AbstractFilter, model: AbstractStateSpaceModel, obse
     :func:`~jaxtrack.filters.run_filter` on any data with the schedule ``observed`` ``(T, m)``
     whenever ``filter.covariance_is_data_free(model)``. Traceable; returns the per-step
     ``(predicted_cov, filtered_cov, gain, innovation_cov)``, each with a leading ``T``.
+
+    **Arguments:**
+
+    - ``filter``: the filter strategy; ``model``: the state-space model.
+    - ``observed``: boolean ``(T, m)``, the measurement schedule.
+    - ``first_step``: ``"update"`` or ``"predict"``, as in :func:`~jaxtrack.filters.run_filter`.
+
+    **Returns:** ``(predicted_cov, filtered_cov, gain, innovation_cov)``, shapes ``(T, n, n)``,
+    ``(T, n, n)``, ``(T, n, m)``, ``(T, m, m)``.
     """
     dtype = model.initial_cov.dtype
     zeros = jnp.zeros(observed.shape, dtype)
@@ -148,7 +157,16 @@ def covariance_pass(filter: AbstractFilter, model: AbstractStateSpaceModel, obse
 
 
 def shared_covariances(filter, model, observed, first_step: FirstStep) -> SharedCovariances:
-    """:func:`covariance_pass` plus the factors the shared mean pass needs (traceable)."""
+    """:func:`covariance_pass` plus the factors the shared mean pass needs (traceable).
+
+    **Arguments:**
+
+    - ``filter``: the filter strategy; ``model``: the state-space model.
+    - ``observed``: boolean ``(T, m)``, the measurement schedule.
+    - ``first_step``: ``"update"`` or ``"predict"``.
+
+    **Returns:** :class:`SharedCovariances` (leading axis ``T``; ``ok`` a scalar).
+    """
     dtype = model.initial_cov.dtype
     pred_cov, filt_cov, gain, innov_cov = covariance_pass(filter, model, observed, first_step)
     # The same factorisation condition_linearized applies to the same S.
@@ -161,7 +179,15 @@ def shared_covariances(filter, model, observed, first_step: FirstStep) -> Shared
 
 
 def mean_maps(filter, model, gain, first_step: FirstStep) -> MeanMap:
-    """The filter's :meth:`~jaxtrack.filters.KalmanFilter.mean_map` at every step (leading ``T``)."""
+    """The filter's :meth:`~jaxtrack.filters.KalmanFilter.mean_map` at every step (leading ``T``).
+
+    **Arguments:**
+
+    - ``filter``: a :class:`~jaxtrack.filters.KalmanFilter`; ``model``: the state-space model.
+    - ``gain``: the shared gains, ``(T, n, m)``; ``first_step``: ``"update"`` or ``"predict"``.
+
+    **Returns:** :class:`~jaxtrack.filters.MeanMap` with a leading axis ``T``.
+    """
     return jax.vmap(lambda k: filter.mean_map(model, gain[k], k, first_step))(jnp.arange(gain.shape[0]))
 
 
@@ -334,6 +360,14 @@ def map_blocks(fn, args, block: int):
 
     The batch is padded to a multiple of ``block`` (with copies of the first run) and the result
     cut back.
+
+    **Arguments:**
+
+    - ``fn``: the per-run function of one run's ``args``.
+    - ``args``: a pytree whose every leaf has the leading run axis ``M``.
+    - ``block``: runs per vmapped block (clipped to ``[1, M]``).
+
+    **Returns:** the pytree of ``fn``'s outputs, each leaf with the leading axis ``M``.
     """
     leaves = jax.tree_util.tree_leaves(args)
     num = leaves[0].shape[0]
@@ -448,6 +482,14 @@ def resolve_covariance(covariance, filter, model, mask_is_shared: bool) -> Abstr
     """The concrete strategy for ``covariance`` (an object, or ``"auto"``/``"shared"``/``"per_run"``).
 
     Raises ``InputError`` for an unknown value or a :class:`SharedCovariance` that does not apply.
+
+    **Arguments:**
+
+    - ``covariance``: an :class:`AbstractCovarianceStrategy` or ``"auto"``, ``"shared"``, ``"per_run"``.
+    - ``filter``: the filter strategy; ``model``: the state-space model.
+    - ``mask_is_shared``: whether every run has the same measurement schedule.
+
+    **Returns:** an :class:`AbstractCovarianceStrategy` (``"auto"`` resolves to shared or per-run).
     """
     if isinstance(covariance, str):
         if covariance not in _BY_NAME:

@@ -158,6 +158,14 @@ def mean_step(mp: MeanMap, gain, x, z, observed):
     ``x`` is ``(n,)`` or ``(n, B)`` (runs as the trailing axis), ``z`` ``(m,)`` or ``(m, B)``,
     ``observed`` ``(m,)``. Missing components of ``z`` are zeroed (they may hold NaN) and their
     innovations are 0. Returns ``(x⁺, y)``: ``x⁺ = A x + W z + c``, ``y = z − (HΦ) x − Hb``.
+
+    **Arguments:**
+
+    - ``mp``: the :class:`MeanMap` of step ``k`` (no leading ``T``); ``gain``: ``W_k``, ``(n, m)``.
+    - ``x``: the previous filtered mean, ``(n,)`` or ``(n, B)``; ``z``: the measurement, ``(m,)`` or
+      ``(m, B)``, in the model's units; ``observed``: boolean ``(m,)``.
+
+    **Returns:** ``(x⁺, y)``: shapes ``(n,)`` and ``(m,)`` (``(n, B)`` and ``(m, B)`` batched).
     """
     col = (lambda v: v) if x.ndim == 1 else (lambda v: v[:, None])  # noqa: E731
     z = jnp.where(col(observed), z, 0.0)

@@ -39,6 +39,12 @@ def matmul(a: Array, b: Array) -> Array:
     which XLA's CPU backend runs as one tiny kernel call per batch element; the sum of
     broadcast products is instead an element-wise loop over the whole batch that fuses with
     its neighbours. Long contractions (``k > MATMUL_UNROLL_MAX``) use ``@``.
+
+    **Arguments:**
+
+    - ``a``: ``(p, k)`` or ``(k,)``; ``b``: ``(k, q)`` or ``(k,)`` (higher ranks fall back to ``@``).
+
+    **Returns:** ``a @ b``: ``(p, q)``, ``(p,)``, ``(q,)`` or a scalar.
     """
     k = a.shape[-1]
     if a.ndim > 2 or b.ndim > 2 or k > MATMUL_UNROLL_MAX or b.shape[0] != k:
@@ -59,6 +65,12 @@ def cholesky(a: Float[Array, "d d"]) -> Float[Array, "d d"]:
 
     Reads the lower triangle only. Not positive definite → NaN entries (as LAPACK's ``potrf``
     through ``jnp.linalg.cholesky``), which the filters turn into ``ok = False``.
+
+    **Arguments:**
+
+    - ``a``: the matrix, ``(..., d, d)``.
+
+    **Returns:** ``L``, lower triangular, ``(..., d, d)``, in the square root of ``a``'s units.
     """
     d = a.shape[-1]
     if d > UNROLL_MAX:
@@ -80,7 +92,14 @@ def cholesky(a: Float[Array, "d d"]) -> Float[Array, "d d"]:
 
 
 def tril_inverse(L: Float[Array, "d d"]) -> Float[Array, "d d"]:
-    """``L⁻¹`` of a lower-triangular ``L`` with non-zero diagonal (forward substitution)."""
+    """``L⁻¹`` of a lower-triangular ``L`` with non-zero diagonal (forward substitution).
+
+    **Arguments:**
+
+    - ``L``: the lower-triangular matrix, ``(d, d)``.
+
+    **Returns:** ``L⁻¹``, lower triangular, ``(d, d)``.
+    """
     d = L.shape[-1]
     if d > UNROLL_MAX:
         return jsl.solve_triangular(L, jnp.eye(d, dtype=L.dtype), lower=True)
@@ -101,14 +120,28 @@ def tril_inverse(L: Float[Array, "d d"]) -> Float[Array, "d d"]:
 
 
 def cholesky_and_inverse(a: Float[Array, "d d"]) -> tuple[Float[Array, "d d"], Float[Array, "d d"]]:
-    """``(L, L⁻¹)`` for a symmetric positive definite ``a``."""
+    """``(L, L⁻¹)`` for a symmetric positive definite ``a``.
+
+    **Arguments:**
+
+    - ``a``: the matrix, ``(d, d)``.
+
+    **Returns:** ``(L, L⁻¹)``, each lower triangular ``(d, d)`` (see :func:`cholesky`, :func:`tril_inverse`).
+    """
     L = cholesky(a)
     return L, tril_inverse(L)
 
 
 def sum_rows(a: Array) -> Array:
     """``a.sum(axis=0)`` over a few rows, as adds: on CPU a reduction over a short leading axis
-    is a separate, slow kernel, while adds fuse with the rest of the step."""
+    is a separate, slow kernel, while adds fuse with the rest of the step.
+
+    **Arguments:**
+
+    - ``a``: the array, ``(r, ...)`` with a short leading axis.
+
+    **Returns:** the sum over the leading axis, ``(...)``.
+    """
     out = a[0]
     for i in range(1, a.shape[0]):
         out = out + a[i]
@@ -116,7 +149,14 @@ def sum_rows(a: Array) -> Array:
 
 
 def all_rows(a: Array) -> Array:
-    """``a.all(axis=0)`` over a few rows, as ``&`` (see :func:`sum_rows`)."""
+    """``a.all(axis=0)`` over a few rows, as ``&`` (see :func:`sum_rows`).
+
+    **Arguments:**
+
+    - ``a``: a boolean array, ``(r, ...)`` with a short leading axis.
+
+    **Returns:** the logical and over the leading axis, boolean ``(...)``.
+    """
     out = a[0]
     for i in range(1, a.shape[0]):
         out = out & a[i]

@@ -27,6 +27,14 @@ from ._linalg import cholesky_and_inverse, matmul, tril_inverse
 
 
 def symmetrize(a: Array) -> Array:
+    """The symmetric part ``(A + Aᵀ)/2`` of a square matrix.
+
+    **Arguments:**
+
+    - ``a``: the matrix, ``(..., d, d)``.
+
+    **Returns:** the symmetric part, ``(..., d, d)``, in the units of ``a``.
+    """
     return 0.5 * (a + jnp.swapaxes(a, -1, -2))
 
 
@@ -48,6 +56,13 @@ def masked_noise(R: Array, observed: Bool[Array, " m"]) -> Array:
     on the missing block, so the gain has zero columns there and ``log det S`` and ``yᵀS⁻¹y`` equal
     those of the observed sub-vector: the update is exactly the one with only the observed rows
     of ``H`` and ``R``, without changing any array shape (so one compilation serves every mask).
+
+    **Arguments:**
+
+    - ``R``: the measurement-noise covariance, ``(m, m)``, in the measurement's units squared.
+    - ``observed``: boolean ``(m,)``, True where the component is observed.
+
+    **Returns:** the masked covariance, ``(m, m)``.
     """
     both = observed[:, None] & observed[None, :]
     return jnp.where(both, R, 0.0) + jnp.diag(jnp.where(observed, 0.0, 1.0).astype(R.dtype))
@@ -58,6 +73,15 @@ def gaussian_log_likelihood(innovation, innovation_cov_chol, num_observed, chol_
 
     With ``chol_inv = L⁻¹`` the innovation is whitened by a product rather than a triangular
     solve, which stays unbatched on the factor side under ``vmap`` (see ``_linalg``).
+
+    **Arguments:**
+
+    - ``innovation``: ``y``, ``(m,)`` (0 in missing components).
+    - ``innovation_cov_chol``: ``L``, lower triangular ``(m, m)``.
+    - ``num_observed``: the number of observed components (scalar).
+    - ``chol_inv``: optional ``L⁻¹``, ``(m, m)`` (computed if not given).
+
+    **Returns:** the log-likelihood, a scalar.
     """
     if chol_inv is None:
         chol_inv = tril_inverse(innovation_cov_chol)
@@ -133,6 +157,18 @@ def condition_linearized(
     (Ho 1968, eqs. (2)–(4)); ``form=StandardForm()`` gives ``P⁺ = (I − W H) P`` instead (see
     :class:`AbstractUpdateForm`). Missing components (``observed`` False) are removed as described
     in :func:`masked_noise`; a supplied gain has its columns for missing components zeroed.
+
+    **Arguments:**
+
+    - ``mean``: the predicted mean ``x``, ``(n,)``; ``cov``: the predicted covariance ``P``, ``(n, n)``.
+    - ``innovation``: ``y = z − ẑ``, ``(m,)``, in the measurement's units.
+    - ``H``: the (linearised) measurement matrix, ``(m, n)``; ``R``: the measurement noise, ``(m, m)``.
+    - ``observed``: boolean ``(m,)``, True where the component is observed.
+    - ``gain``: optional gain ``W``, ``(n, m)`` (default: the optimal gain).
+    - ``form``: the covariance update form (default ``JosephForm()``).
+
+    **Returns:** :class:`Conditioned`: the updated mean ``(n,)`` and covariance ``(n, n)``, the
+    innovation ``(m,)``, ``S`` ``(m, m)``, the log-likelihood (scalar) and the gain ``(n, m)``.
     """
     obs_f = observed.astype(cov.dtype)
     H = H * obs_f[:, None]
@@ -175,6 +211,15 @@ def condition_on_moments(
 
     ``cross_cov`` is ``C = Cov(x, z)`` (n, m) and ``innovation_cov`` is ``S = Cov(z)`` including R.
     Missing components are removed as in :func:`masked_noise`.
+
+    **Arguments:**
+
+    - ``mean``: the predicted mean, ``(n,)``; ``cov``: the predicted covariance, ``(n, n)``.
+    - ``innovation``: ``z − ẑ``, ``(m,)``, in the measurement's units.
+    - ``innovation_cov``: ``S``, ``(m, m)``; ``cross_cov``: ``C``, ``(n, m)``.
+    - ``observed``: boolean ``(m,)``, True where the component is observed.
+
+    **Returns:** :class:`Conditioned`, as for :func:`condition_linearized`.
     """
     obs_f = observed.astype(cov.dtype)
     both = observed[:, None] & observed[None, :]

@@ -69,6 +69,12 @@ def rotate(rot, vec) -> jnp.ndarray:
 
     Use it to carry vectors (biases, velocities) between frames, e.g. with
     :func:`enu_to_enu_rotation`.
+
+    **Arguments:**
+
+    - ``rot``: rotation matrices, ``(..., 3, 3)``; ``vec``: vectors, ``(..., 3)``, any units.
+
+    **Returns:** the rotated vectors, ``(..., 3)`` (broadcast leading axes), in the units of ``vec``.
     """
     vec = jnp.asarray(vec, dtype=jnp.result_type(rot, vec))
     rot, vec = jnp.broadcast_arrays(rot, vec[..., None, :])
@@ -159,6 +165,13 @@ def face_to_enu_rotation(psi, theta) -> jnp.ndarray:
     """``T_FACE2ENU(ψ, θ) = T_ENU2FACE(ψ, θ)'`` (Serakos et al., eq. 8); columns ``u_r, u_cA, u_cB``.
 
     Shapes as :func:`enu_to_face_rotation`; returns ``(..., 3, 3)`` with ``v_ENU = T @ v_FACE``.
+
+    **Arguments:**
+
+    - ``psi``: the face boresight azimuth from East towards North (rad); ``theta``: its elevation (rad).
+      Broadcast-compatible shapes ``(...)``.
+
+    **Returns:** ``T_FACE2ENU``, shape ``(..., 3, 3)``.
     """
     return jnp.swapaxes(enu_to_face_rotation(psi, theta), -1, -2)
 
@@ -189,7 +202,14 @@ def face_bias_matrix(slant_range, psi, theta) -> jnp.ndarray:
 
 
 def prime_vertical_radius(lat) -> jnp.ndarray:
-    """Prime-vertical radius of curvature ``N(L) = r_ee / sqrt(1 − e² sin²L)`` on WGS-84, metres."""
+    """Prime-vertical radius of curvature ``N(L) = r_ee / sqrt(1 − e² sin²L)`` on WGS-84, metres.
+
+    **Arguments:**
+
+    - ``lat``: the geodetic latitude ``L`` (rad), shape ``(...)``.
+
+    **Returns:** ``N(L)``, shape ``(...)``, m.
+    """
     (lat,) = _broadcast(lat)
     return WGS84_A / jnp.sqrt(1.0 - WGS84_E2 * jnp.sin(lat) ** 2)
 

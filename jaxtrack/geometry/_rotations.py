@@ -28,35 +28,70 @@ def _angle(angle: ArrayLike) -> Array:
 
 
 def rotation_x(angle: ArrayLike) -> Float[Array, "... 3 3"]:
-    """Active rotation by ``angle`` (rad) about x: ``[[1,0,0],[0,c,−s],[0,s,c]]``; ``(...)`` → ``(..., 3, 3)``."""
+    """Active rotation by ``angle`` (rad) about x: ``[[1,0,0],[0,c,−s],[0,s,c]]``; ``(...)`` → ``(..., 3, 3)``.
+
+    **Arguments:**
+
+    - ``angle``: the rotation angle (rad), shape ``(...)``.
+
+    **Returns:** the rotation matrix, shape ``(..., 3, 3)``.
+    """
     a = _angle(angle)
     c, s, o, i = jnp.cos(a), jnp.sin(a), jnp.zeros_like(a), jnp.ones_like(a)
     return _stack_matrix([[i, o, o], [o, c, -s], [o, s, c]])
 
 
 def rotation_y(angle: ArrayLike) -> Float[Array, "... 3 3"]:
-    """Active rotation by ``angle`` (rad) about y: ``[[c,0,s],[0,1,0],[−s,0,c]]``; ``(...)`` → ``(..., 3, 3)``."""
+    """Active rotation by ``angle`` (rad) about y: ``[[c,0,s],[0,1,0],[−s,0,c]]``; ``(...)`` → ``(..., 3, 3)``.
+
+    **Arguments:**
+
+    - ``angle``: the rotation angle (rad), shape ``(...)``.
+
+    **Returns:** the rotation matrix, shape ``(..., 3, 3)``.
+    """
     a = _angle(angle)
     c, s, o, i = jnp.cos(a), jnp.sin(a), jnp.zeros_like(a), jnp.ones_like(a)
     return _stack_matrix([[c, o, s], [o, i, o], [-s, o, c]])
 
 
 def rotation_z(angle: ArrayLike) -> Float[Array, "... 3 3"]:
-    """Active rotation by ``angle`` (rad) about z: ``[[c,−s,0],[s,c,0],[0,0,1]]``; ``(...)`` → ``(..., 3, 3)``."""
+    """Active rotation by ``angle`` (rad) about z: ``[[c,−s,0],[s,c,0],[0,0,1]]``; ``(...)`` → ``(..., 3, 3)``.
+
+    **Arguments:**
+
+    - ``angle``: the rotation angle (rad), shape ``(...)``.
+
+    **Returns:** the rotation matrix, shape ``(..., 3, 3)``.
+    """
     a = _angle(angle)
     c, s, o, i = jnp.cos(a), jnp.sin(a), jnp.zeros_like(a), jnp.ones_like(a)
     return _stack_matrix([[c, -s, o], [s, c, o], [o, o, i]])
 
 
 def skew(a: ArrayLike) -> Float[Array, "... 3 3"]:
-    """The cross-product matrix ``[a×]`` with ``[a×] b = a × b``; ``a`` shape ``(..., 3)``."""
+    """The cross-product matrix ``[a×]`` with ``[a×] b = a × b``; ``a`` shape ``(..., 3)``.
+
+    **Arguments:**
+
+    - ``a``: the vector, shape ``(..., 3)``, any units.
+
+    **Returns:** ``[a×]``, shape ``(..., 3, 3)``, in the units of ``a``.
+    """
     a = jnp.asarray(a)
     zero = jnp.zeros_like(a[..., 0])
     return _stack_matrix([[zero, -a[..., 2], a[..., 1]], [a[..., 2], zero, -a[..., 0]], [-a[..., 1], a[..., 0], zero]])
 
 
 def vee(S: ArrayLike) -> Float[Array, "... 3"]:
-    """Inverse of :func:`skew`: the axial vector of the skew-symmetric part of ``S`` ``(..., 3, 3)``."""
+    """Inverse of :func:`skew`: the axial vector of the skew-symmetric part of ``S`` ``(..., 3, 3)``.
+
+    **Arguments:**
+
+    - ``S``: the matrix, shape ``(..., 3, 3)``.
+
+    **Returns:** the axial vector, shape ``(..., 3)``, in the units of ``S``.
+    """
     S = jnp.asarray(S)
     A = 0.5 * (S - jnp.swapaxes(S, -1, -2))
     return jnp.stack([A[..., 2, 1], A[..., 0, 2], A[..., 1, 0]], axis=-1)
@@ -68,6 +103,12 @@ def rotation_vector_to_dcm(rotation: ArrayLike) -> Float[Array, "3 3"]:
     ``exp([a×]) = I + (sin θ/θ)[a×] + ((1 − cos θ)/θ²)[a×]²`` with ``θ = ‖a‖``. Series
     coefficients are used for ``θ² < 1e-8``, so the value and its derivatives stay exact and
     finite at ``a = 0`` (where error-state Jacobians are taken). ``a`` shape ``(3,)``.
+
+    **Arguments:**
+
+    - ``rotation``: the rotation vector ``a`` (rad), shape ``(3,)``.
+
+    **Returns:** the rotation matrix, shape ``(3, 3)``.
     """
     a = jnp.asarray(rotation)
     theta2 = a @ a
@@ -85,6 +126,12 @@ def euler_321_to_dcm(angles: ArrayLike) -> Float[Array, "... 3 3"]:
     The aerospace 3-2-1 (yaw, pitch, roll) sequence: the matrix maps body components to the
     reference frame (e.g. ``C_b^n`` of Layne & Blasch 1997, E12), written out element by element.
     It equals ``rotation_z(a_z) @ rotation_y(a_y) @ rotation_x(a_x)`` (tested).
+
+    **Arguments:**
+
+    - ``angles``: ``[roll a_x, pitch a_y, yaw a_z]`` (rad), shape ``(..., 3)``.
+
+    **Returns:** the direction cosine matrix, shape ``(..., 3, 3)``.
     """
     a = jnp.asarray(angles)
     ax, ay, az = a[..., 0], a[..., 1], a[..., 2]

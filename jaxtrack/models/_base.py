@@ -42,6 +42,12 @@ def wrap_angle(angle: ArrayLike) -> Array:
     """Wrap an angle (radians) to the interval (−π, π].
 
     Written with ``jnp.where`` so the derivative is 1 everywhere except at the wrap point.
+
+    **Arguments:**
+
+    - ``angle``: the angle (rad), shape ``(...)``.
+
+    **Returns:** the wrapped angle (rad), shape ``(...)``.
     """
     angle = jnp.asarray(angle)
     wrapped = jnp.remainder(angle + jnp.pi, 2 * jnp.pi) - jnp.pi
@@ -50,7 +56,15 @@ def wrap_angle(angle: ArrayLike) -> Array:
 
 
 def at_step(a: Array, k, matrix_ndim: int) -> Array:
-    """Return ``a`` if it is constant (``a.ndim == matrix_ndim``) or ``a[k]`` if given per step."""
+    """Return ``a`` if it is constant (``a.ndim == matrix_ndim``) or ``a[k]`` if given per step.
+
+    **Arguments:**
+
+    - ``a``: a matrix (``a.ndim == matrix_ndim``) or a per-step stack with a leading axis ``T``.
+    - ``k``: the step index; ``matrix_ndim``: the rank of one step's value (e.g. 2 for ``(n, n)``).
+
+    **Returns:** the value at step ``k``, of rank ``matrix_ndim``.
+    """
     return a if a.ndim == matrix_ndim else a[k]
 
 

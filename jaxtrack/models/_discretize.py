@@ -28,6 +28,16 @@ def check_taus(name: str, taus, *, allow_vector: bool = True) -> Array:
 
     Accepts a scalar ``()`` or, with ``allow_vector``, a schedule of shape ``(T,)`` with ``T ≥ 1``.
     Every entry must be finite and strictly positive (seconds).
+
+    **Arguments:**
+
+    - ``name``: the argument name for error messages.
+    - ``taus``: the sampling period(s) (s), scalar ``()`` or ``(T,)``.
+    - ``allow_vector``: accept a ``(T,)`` schedule (default True).
+
+    **Returns:** ``taus`` as a floating array of the same shape, s.
+
+    **Raises:** ``InputError`` for a wrong shape, an empty schedule, or non-finite or non-positive entries.
     """
     taus = jnp.asarray(taus)
     taus = taus.astype(jnp.result_type(taus, float))

@@ -37,17 +37,43 @@ Accumulate = Callable[[PyTree, PyTree, jax.Array], PyTree]
 
 
 def add_totals(totals, delta, start):
-    """The default accumulation: running sums (``start`` unused)."""
+    """The default accumulation: running sums (``start`` unused).
+
+    **Arguments:**
+
+    - ``totals``: the running totals, a pytree of arrays; ``delta``: one block's contribution, the same
+      structure and shapes; ``start``: the block's first run index (unused).
+
+    **Returns:** ``totals + delta`` leaf by leaf, the same structure and shapes.
+    """
     del start
     return jax.tree_util.tree_map(jnp.add, totals, delta)
 
 
 def block_size_for(num_runs: int, largest: int) -> int:
-    """Runs per block: ``largest``, or the next power of two above ``num_runs`` when fewer."""
+    """Runs per block: ``largest``, or the next power of two above ``num_runs`` when fewer.
+
+    **Arguments:**
+
+    - ``num_runs``: the number of runs ``M ≥ 1``; ``largest``: the largest block size.
+
+    **Returns:** the block size, a Python int.
+    """
     return min(largest, 1 << max(0, (num_runs - 1).bit_length()))
 
 
 def check_mesh(mesh, axes) -> None:
+    """Raise unless ``mesh`` is a :class:`~jax.sharding.Mesh` with at least one of ``axes``.
+
+    **Arguments:**
+
+    - ``mesh``: the mesh to check.
+    - ``axes``: axis names (``None`` entries are ignored).
+
+    **Returns:** ``None``.
+
+    **Raises:** ``InputError`` for a non-mesh or a mesh with none of ``axes``.
+    """
     if not isinstance(mesh, Mesh):
         raise InputError(f"`mesh` must be a jax.sharding.Mesh (see jaxtrack.montecarlo.run_mesh); got {type(mesh).__name__}.")
     if not any(a in mesh.axis_names for a in axes if a is not None):
@@ -130,6 +156,17 @@ def run_blocks(
     over parameter values), ``value`` and ``totals`` carry a leading axis over the values,
     shared out along ``sweep_axis``. Results are identical on any mesh. ``chunk_size`` sets how
     many runs pass between progress-bar updates (the host waits only then).
+
+    **Arguments:**
+
+    - ``block_fn``: ``(common, value, key, start, valid) -> delta``, as above; ``totals``: the initial
+      totals, a pytree (with a leading axis over the values under ``sweep_axis``).
+    - ``common``: a pytree passed to every block; ``key``: the base PRNG key.
+    - ``num_runs``: ``M``; ``block``: runs per block.
+    - ``value``: the swept value(s) (``None`` without a sweep); ``accumulate``: the fold, default
+      :func:`add_totals`.
+    - ``mesh``, ``run_axis``, ``sweep_axis``: the device mesh and its axis names, as above.
+    - ``chunk_size``, ``progress``, ``desc``: the progress bar.
 
     **Returns:** the accumulated totals, as host arrays.
     """

@@ -18,6 +18,12 @@ def normalized_squared_error(error: Array, cov: Array) -> Array:
     decoupled (identity rows/columns, zero error), as in :class:`~jaxtrack.filters.FilterResult`.
     The error is whitened by a product with ``L⁻¹``, not a triangular solve, so that under
     ``jax.vmap`` with a covariance shared by the batch only the product is batched.
+
+    **Arguments:**
+
+    - ``error``: ``e``, ``(d,)``; ``cov``: ``P``, ``(d, d)``, in the units of ``e`` squared.
+
+    **Returns:** ``eᵀ P⁻¹ e``, a scalar (dimensionless).
     """
     _, chol_inv = cholesky_and_inverse(cov)
     whitened = matmul(chol_inv, error)
@@ -35,7 +41,14 @@ def chi2_mean_bounds(dof: ArrayLike, num_runs: int, confidence: float = 0.95) ->
     (Bar-Shalom, Li & Kirubarajan 2001, §5.4.2). ``dof`` may be an array (e.g. NIS degrees of
     freedom per step under a mask); where it is 0 both bounds are 0.
 
+    **Arguments:**
+
+    - ``dof``: the degrees of freedom ``d`` per run, scalar or array ``(...)``.
+    - ``num_runs``: ``M ≥ 1``; ``confidence``: in ``(0, 1)`` (default 0.95).
+
     **Returns:** an array of shape ``dof.shape + (2,)``: lower and upper bound.
+
+    **Raises:** ``InputError`` for ``confidence`` outside ``(0, 1)`` or ``num_runs < 1``.
     """
     if not 0.0 < confidence < 1.0:
         raise InputError(f"`confidence` must lie in (0, 1); got {confidence}.")

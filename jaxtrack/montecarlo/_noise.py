@@ -30,7 +30,14 @@ def _rotl(x: Array, r: int) -> Array:
 
 
 def threefry2x32(k0: Array, k1: Array, x0: Array, x1: Array) -> tuple[Array, Array]:
-    """Threefry-2x32, 20 rounds, on ``uint32`` arrays (broadcasting); rounds unrolled."""
+    """Threefry-2x32, 20 rounds, on ``uint32`` arrays (broadcasting); rounds unrolled.
+
+    **Arguments:**
+
+    - ``k0``, ``k1``: the key words; ``x0``, ``x1``: the counter words. ``uint32``, broadcastable ``(...)``.
+
+    **Returns:** ``(y0, y1)``, two ``uint32`` arrays of the broadcast shape ``(...)``.
+    """
     ks = (k0, k1, k0 ^ k1 ^ np.uint32(0x1BD11BDA))
     x0 = x0 + ks[0]
     x1 = x1 + ks[1]
@@ -45,7 +52,16 @@ def threefry2x32(k0: Array, k1: Array, x0: Array, x1: Array) -> tuple[Array, Arr
 
 
 def key_words(key: PRNGKeyArray) -> Array:
-    """The two ``uint32`` words of a Threefry key (typed ``jax.random.key`` or raw ``PRNGKey``)."""
+    """The two ``uint32`` words of a Threefry key (typed ``jax.random.key`` or raw ``PRNGKey``).
+
+    **Arguments:**
+
+    - ``key``: a Threefry key or batch of keys, typed ``(*batch,)`` or raw ``(*batch, 2)``.
+
+    **Returns:** the key words, ``uint32`` ``(*batch, 2)``.
+
+    **Raises:** ``TypeError`` for a key that is not Threefry.
+    """
     if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
         key = jax.random.key_data(key)
     if key.shape[-1:] != (2,) or key.dtype != jnp.uint32:
@@ -63,6 +79,13 @@ def step_normals(words: Array, k, num: int, dtype) -> Array:
     the batch is the trailing axis, the layout the batched simulation uses. Draw ``j`` of a key
     uses the Threefry counter ``(k, j)``, so a step's numbers depend only on the key, the step and
     ``j`` (not on how many steps, numbers or runs are drawn together).
+
+    **Arguments:**
+
+    - ``words``: ``(*batch, 2)`` ``uint32`` key words; ``k``: the step index.
+    - ``num``: draws per key; ``dtype``: the floating dtype.
+
+    **Returns:** standard normal draws, ``(num, *batch)``, of ``dtype``.
     """
     batch = words.shape[:-1]
     shape = (num,) + batch

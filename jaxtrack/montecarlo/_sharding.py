@@ -48,6 +48,13 @@ def run_mesh(devices: Sequence[jax.Device] | None = None, axis_name: str = RUN_A
     ``jax.config.update("jax_num_cpu_devices", N)`` (or
     ``XLA_FLAGS=--xla_force_host_platform_device_count=N``); across hosts, call
     ``jax.distributed.initialize`` first.
+
+    **Arguments:**
+
+    - ``devices``: the devices (default: ``jax.devices()``).
+    - ``axis_name``: the mesh axis name (default ``RUN_AXIS``).
+
+    **Returns:** a :class:`jax.sharding.Mesh` of shape ``(len(devices),)``.
     """
     devices = jax.devices() if devices is None else list(devices)
     return Mesh(np.asarray(devices), (axis_name,))
@@ -55,7 +62,18 @@ def run_mesh(devices: Sequence[jax.Device] | None = None, axis_name: str = RUN_A
 
 def sweep_mesh(num_sweep: int, devices: Sequence[jax.Device] | None = None) -> Mesh:
     """A ``(sweep, runs)`` mesh: ``num_sweep`` groups of devices share the parameter values,
-    the devices of a group share the runs. ``num_sweep`` must divide the device count."""
+    the devices of a group share the runs. ``num_sweep`` must divide the device count.
+
+    **Arguments:**
+
+    - ``num_sweep``: the number of device groups (the ``SWEEP_AXIS`` size).
+    - ``devices``: the devices (default: ``jax.devices()``).
+
+    **Returns:** a :class:`jax.sharding.Mesh` of shape ``(num_sweep, len(devices) // num_sweep)``, axes
+    ``(SWEEP_AXIS, RUN_AXIS)``.
+
+    **Raises:** ``ValueError`` if ``num_sweep`` is not a positive divisor of the device count.
+    """
     devices = jax.devices() if devices is None else list(devices)
     if num_sweep < 1 or len(devices) % num_sweep:
         raise ValueError(f"`num_sweep` = {num_sweep} must divide the number of devices ({len(devices)}).")
@@ -63,7 +81,14 @@ def sweep_mesh(num_sweep: int, devices: Sequence[jax.Device] | None = None) -> M
 
 
 def axis_size(mesh: Mesh, name: str) -> int:
-    """Devices along ``name`` (1 if the mesh has no such axis)."""
+    """Devices along ``name`` (1 if the mesh has no such axis).
+
+    **Arguments:**
+
+    - ``mesh``: the mesh; ``name``: an axis name.
+
+    **Returns:** the axis size, a Python int.
+    """
     return int(dict(mesh.shape).get(name, 1))
 
 
@@ -73,6 +98,13 @@ def place(tree, mesh: Mesh, spec: P = P()):
     Built from this process's host value of each leaf (which every process holds identically),
     so it works the same on one host and across hosts, where a plain host array could not be
     passed to a computation spanning other processes' devices.
+
+    **Arguments:**
+
+    - ``tree``: a pytree; array leaves (NumPy or JAX, PRNG keys included) are placed, others kept.
+    - ``mesh``: the mesh; ``spec``: the :class:`~jax.sharding.PartitionSpec` (default: replicated).
+
+    **Returns:** the pytree with each array leaf a global ``jax.Array`` of the same shape and dtype.
     """
     sharding = NamedSharding(mesh, spec)
 
@@ -89,7 +121,14 @@ def place(tree, mesh: Mesh, spec: P = P()):
 
 
 def local_value(tree):
-    """Host copies of the replicated result arrays (readable on every process)."""
+    """Host copies of the replicated result arrays (readable on every process).
+
+    **Arguments:**
+
+    - ``tree``: a pytree of result arrays (other leaves are kept).
+
+    **Returns:** the pytree with each ``jax.Array`` leaf as a NumPy array of the same shape.
+    """
 
     def one(a):
         if isinstance(a, jax.Array) and not a.is_fully_addressable:

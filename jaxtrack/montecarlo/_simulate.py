@@ -28,6 +28,12 @@ def psd_sqrt(cov: Array) -> Array:
 
     Plant noise is often singular (noise on the velocity only), where a Cholesky factor is NaN;
     the symmetric eigendecomposition handles it. Tiny negative eigenvalues from rounding clip to 0.
+
+    **Arguments:**
+
+    - ``cov``: a symmetric positive semidefinite matrix, ``(..., n, n)`` (leading axes batch).
+
+    **Returns:** ``L``, shape ``(..., n, n)``, in the square root of ``cov``'s units.
     """
     eigvals, eigvecs = jnp.linalg.eigh(cov)
     return eigvecs * jnp.sqrt(jnp.clip(eigvals, 0.0))[..., None, :]
@@ -42,7 +48,16 @@ class NoiseFactors(NamedTuple):
 
 
 def noise_factors(model: AbstractStateSpaceModel, num_steps: int) -> NoiseFactors:
-    """Factor Q, R and the prior covariance once, outside the per-run scan."""
+    """Factor Q, R and the prior covariance once, outside the per-run scan.
+
+    **Arguments:**
+
+    - ``model``: the state-space model.
+    - ``num_steps``: ``T``, used when the model's covariances vary per step.
+
+    **Returns:** :class:`NoiseFactors`: ``L_Q`` ``(n, n)`` or ``(T, n, n)``, ``L_R`` ``(m, m)`` or
+    ``(T, m, m)``, and the prior's factor ``(n, n)``, in the square root of the covariances' units.
+    """
     if model.num_steps is None:
         Lq = psd_sqrt(model.process_noise_cov(0))
         Lr = psd_sqrt(model.measurement_noise_cov(0))
@@ -54,12 +69,28 @@ def noise_factors(model: AbstractStateSpaceModel, num_steps: int) -> NoiseFactor
 
 
 def step_keys(key: PRNGKeyArray) -> tuple[PRNGKeyArray, PRNGKeyArray]:
-    """Split a run's key into the prior-draw key and the base key of the per-step draws."""
+    """Split a run's key into the prior-draw key and the base key of the per-step draws.
+
+    **Arguments:**
+
+    - ``key``: the run's PRNG key.
+
+    **Returns:** ``(prior_key, steps_key)``, two PRNG keys.
+    """
     prior_key, steps_key = jax.random.split(key)
     return prior_key, steps_key
 
 
 def draw_initial_state(model, factors: NoiseFactors, prior_key) -> Array:
+    """Draw ``x_0 = m_0 + L_0 ε`` from the model's prior ``N(m_0, P_0)``.
+
+    **Arguments:**
+
+    - ``model``: the state-space model; ``factors``: its :class:`NoiseFactors`.
+    - ``prior_key``: the run's prior-draw key (:func:`step_keys`).
+
+    **Returns:** ``x_0``, shape ``(n,)``, in the model's state units.
+    """
     n = model.state_dim
     eps = jax.random.normal(prior_key, (n,), model.initial_mean.dtype)
     return model.initial_mean + matmul(factors.prior, eps)
@@ -71,6 +102,15 @@ def simulate_step(model, factors: NoiseFactors, first_step: FirstStep, x_prev, s
     Step ``k``'s ``n + m`` standard normal numbers come from the run's ``steps_key`` and the
     step index alone (see :func:`step_noise`): the plant noise uses the first ``n``, the
     measurement noise the last ``m``.
+
+    **Arguments:**
+
+    - ``model``: the state-space model; ``factors``: its :class:`NoiseFactors`.
+    - ``first_step``: ``"update"`` (no transition into step 0) or ``"predict"``.
+    - ``x_prev``: ``x_{k-1}``, ``(n,)`` (at ``k = 0`` under ``"update"``: the drawn ``x_0``).
+    - ``steps_key``: the run's per-step key (:func:`step_keys`); ``k``: the step index.
+
+    **Returns:** ``(x_k, z_k)``, shapes ``(n,)`` and ``(m,)``, in the model's units.
     """
     eps = step_noise(steps_key, k, model.state_dim + model.meas_dim, model.initial_mean.dtype)
     return advance(model, factors, first_step, x_prev, eps, k)
@@ -81,6 +121,13 @@ def step_noise(steps_key: PRNGKeyArray, k, num: int, dtype) -> Array:
 
     One Threefry-2x32 evaluation per number, counter ``(k, j)`` (see :mod:`._noise`): the same
     numbers whether a run is simulated alone or in a batch of any size.
+
+    **Arguments:**
+
+    - ``steps_key``: the run's per-step PRNG key; ``k``: the step index.
+    - ``num``: how many numbers; ``dtype``: their floating dtype.
+
+    **Returns:** ``(num,)`` standard normal numbers.
     """
     return step_normals(key_words(steps_key), k, num, dtype)
 
@@ -92,6 +139,17 @@ def advance(model, factors: NoiseFactors, first_step: FirstStep, x_prev, eps, k)
     model's functions are then mapped over it). The noise products use ``matmul``, which sums in
     the same order with or without the batch axis, so a run replayed alone by :func:`simulate`
     reproduces the Monte Carlo harness's run exactly.
+
+    **Arguments:**
+
+    - ``model``: the state-space model; ``factors``: its :class:`NoiseFactors`.
+    - ``first_step``: ``"update"`` (``x_0`` is ``x_prev`` at ``k = 0``) or ``"predict"``.
+    - ``x_prev``: ``x_{k-1}``, ``(n,)`` or ``(n, B)``; ``eps``: ``(n + m,)`` or ``(n + m, B)`` standard
+      normals.
+    - ``k``: the step index.
+
+    **Returns:** ``(x_k, z_k)``, shapes ``(n,)`` and ``(m,)`` (``(n, B)`` and ``(m, B)`` batched), in the
+    model's units.
     """
     n = model.state_dim
     transition, measurement = model.transition, model.measurement

@@ -83,7 +83,16 @@ def gain_variation_recursion(
     covariance of the suboptimal filter, ``covariance_recursion(model, gain=W° + ΔW)``: the
     difference is third order in ``ΔW``.
 
+    **Arguments:**
+
+    - ``model``: the :class:`~jaxtrack.models.LinearGaussianModel`.
+    - ``dW``: the gain changes ``ΔW``, ``(n, m)`` (every step) or ``(T, n, m)``.
+    - ``num_steps``: ``T``; defaults to the model's per-step length.
+    - ``first_step``: ``"update"`` (default) or ``"predict"``.
+
     **Returns:** ``ΔP_{k/k}``, ``(T, n, n)``.
+
+    **Raises:** ``InputError`` for a ``dW`` of the wrong shape.
     """
     history = covariance_recursion(model, num_steps, first_step=first_step)
     T = history.filtered_cov.shape[0]
@@ -170,7 +179,17 @@ def gain_hessian(
     - ``Autodiff()``: ``jax.hessian`` of ``J`` through the Joseph-form covariance recursion with
       the gain at step ``k`` replaced by ``W°_k + ΔW`` (all other gains held optimal).
 
+    **Arguments:**
+
+    - ``model``: the :class:`~jaxtrack.models.LinearGaussianModel`.
+    - ``weight``: ``L_T``, ``(n, n)``; ``step``: ``k``, in ``[0, T)``.
+    - ``num_steps``: ``T``; defaults to the model's per-step length.
+    - ``method``: ``Analytic()`` (default) or ``Autodiff()``.
+    - ``first_step``: ``"update"`` (default) or ``"predict"``.
+
     **Returns:** ``(nm, nm)`` in column-major ``vec`` order.
+
+    **Raises:** ``InputError`` for a ``step`` out of range.
     """
     method = _check_method(method)
     history = covariance_recursion(model, num_steps, first_step=first_step)

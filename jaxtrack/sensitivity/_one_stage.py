@@ -85,7 +85,15 @@ def one_stage_update(p_xv: ArrayLike, tau: ArrayLike, q_x: ArrayLike, q_v: Array
 
 
 def one_stage_gain(p_xv: ArrayLike, tau: ArrayLike, q_x: ArrayLike, r_x: ArrayLike) -> tuple[Array, Array]:
-    r"""Gain components ``k₁ = (p_x)_{k/k-1}/(R_x + (p_x)_{k/k-1})``, ``k₂ = (p_xv)_{k/k-1}/(R_x + (p_x)_{k/k-1})`` (eq. (105))."""
+    r"""Gain components ``k₁ = (p_x)_{k/k-1}/(R_x + (p_x)_{k/k-1})``, ``k₂ = (p_xv)_{k/k-1}/(R_x + (p_x)_{k/k-1})`` (eq. (105)).
+
+    **Arguments** (all normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``p_xv``: the correlation of ``P_{k-1/k-1}`` (−1 < p_xv < 1); ``tau``: the normalised period (C.10).
+    - ``q_x``: the position plant-noise variance (C.16); ``r_x``: the measurement-noise variance (C.13).
+
+    **Returns:** ``(k₁, k₂)``, each of the broadcast shape ``(...)``, dimensionless.
+    """
     m, c, _ = _predicted(jnp.asarray(p_xv), jnp.asarray(tau), jnp.asarray(q_x), 0.0)
     s = jnp.asarray(r_x) + m
     return m / s, c / s
@@ -101,6 +109,13 @@ def plant_noise_sensitivity(p_xv, tau, q_x, r_x, dqx_dalpha, dqv_dalpha) -> Norm
         \frac{∂p_v}{∂α} = k_2^2\frac{∂q_x}{∂α} + \frac{∂q_v}{∂α}
 
     ``P_{k-1/k-1}`` is held fixed (one stage); ``R_x`` does not depend on α (eq. (103)).
+
+    **Arguments** (all normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``p_xv``, ``tau``, ``q_x``, ``r_x``: the stage, as in :func:`one_stage_gain`.
+    - ``dqx_dalpha``, ``dqv_dalpha``: ``∂q_x/∂α`` and ``∂q_v/∂α``.
+
+    **Returns:** :class:`NormalizedCov` of ``∂P_{k/k}/∂α``, entries of the broadcast shape ``(...)``.
     """
     k1, k2 = one_stage_gain(p_xv, tau, q_x, r_x)
     dqx, dqv = jnp.asarray(dqx_dalpha), jnp.asarray(dqv_dalpha)
@@ -120,6 +135,14 @@ def period_sensitivity(p_xv, tau, q_x, r_x, dqx_dtau, dqv_dtau, drx_dtau=0.0) ->
 
     The OCR prints ``− k₁k₂ ∂R_x/∂τ``; the derivation and finite differences give ``+`` (spec §6
     item 7). ``drx_dtau`` is nonzero for presmoothed data (``R_x = β/τ``, eq. (115)).
+
+    **Arguments** (all normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``p_xv``, ``tau``, ``q_x``, ``r_x``: the stage, as in :func:`one_stage_gain`.
+    - ``dqx_dtau``, ``dqv_dtau``: ``∂q_x/∂τ`` and ``∂q_v/∂τ``.
+    - ``drx_dtau``: ``∂R_x/∂τ`` (default 0: unsmoothed data).
+
+    **Returns:** :class:`NormalizedCov` of ``∂P_{k/k}/∂τ``, entries of the broadcast shape ``(...)``.
     """
     k1, k2 = one_stage_gain(p_xv, tau, q_x, r_x)
     c = 2 * jnp.asarray(tau) + 2 * jnp.asarray(p_xv) + jnp.asarray(dqx_dtau)
@@ -133,7 +156,15 @@ def period_sensitivity(p_xv, tau, q_x, r_x, dqx_dtau, dqv_dtau, drx_dtau=0.0) ->
 
 def measurement_noise_sensitivity(p_xv, tau, q_x, r_x, drx_dbeta) -> NormalizedCov:
     r"""``∂P_{k/k}/∂β`` for a measurement-noise parameter β (Ho 1968, eq. (107)):
-    ``(k₁², k₁k₂, k₂²)·∂R_x/∂β``."""
+    ``(k₁², k₁k₂, k₂²)·∂R_x/∂β``.
+
+    **Arguments** (all normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``p_xv``, ``tau``, ``q_x``, ``r_x``: the stage, as in :func:`one_stage_gain`.
+    - ``drx_dbeta``: ``∂R_x/∂β``.
+
+    **Returns:** :class:`NormalizedCov` of ``∂P_{k/k}/∂β``, entries of the broadcast shape ``(...)``.
+    """
     k1, k2 = one_stage_gain(p_xv, tau, q_x, r_x)
     d = jnp.asarray(drx_dbeta)
     return NormalizedCov(k1**2 * d, k1 * k2 * d, k2**2 * d)
@@ -152,6 +183,13 @@ def plant_noise_period_tradeoff(p_xv: ArrayLike, tau: ArrayLike, alpha: ArrayLik
 
     → 0 for small ``α²τ³`` and → −½ for large. The numerator of (111) is missing in the OCR.
     Use: a maneuvering target raises α; this is the period cut that restores accuracy.
+
+    **Arguments** (all normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``p_xv``: the correlation of ``P_{k-1/k-1}``; ``tau``: the normalised period.
+    - ``alpha``: the normalised acceleration standard deviation of eq. (108).
+
+    **Returns:** ``(Δτ/τ)/(Δα/α)``, dimensionless, in ``[−½, 0]``, the broadcast shape ``(...)``.
     """
     p_xv, tau, alpha = (jnp.asarray(a) for a in (p_xv, tau, alpha))
     return -0.5 / (1.0 + 2.0 * (tau + p_xv) / (alpha**2 * tau**3))
@@ -168,6 +206,14 @@ def measurement_noise_period_tradeoff(p_xv: ArrayLike, tau: ArrayLike, alpha: Ar
     The OCR of (117) is garbled; this is the form derived from (114) and checked against finite
     differences (spec §4.4). Its limits are the reverse of the memo's text: a small ``β`` gives
     ``Δτ/τ → Δβ/β``, a large ``β`` gives ``Δτ/τ → 0``.
+
+    **Arguments** (all normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``p_xv``: the correlation of ``P_{k-1/k-1}``; ``tau``: the normalised period.
+    - ``alpha``: the normalised acceleration standard deviation; ``beta``: the presmoothing
+      parameter of ``R_x = β/τ``.
+
+    **Returns:** ``(Δτ/τ)/(Δβ/β)``, dimensionless, the broadcast shape ``(...)``.
     """
     p_xv, tau, alpha, beta = (jnp.asarray(a) for a in (p_xv, tau, alpha, beta))
     m = 1.0 + 2.0 * p_xv * tau + tau**2 + 0.25 * alpha**2 * tau**4
@@ -177,13 +223,27 @@ def measurement_noise_period_tradeoff(p_xv: ArrayLike, tau: ArrayLike, alpha: Ar
 
 def predicted_position_variance(a: ArrayLike, tau: ArrayLike) -> Array:
     r"""``(p_x)_{k/k-1} = 1 + aτ + τ²`` (Ho 1968, eq. (128)); ``a = 2p_xv`` (130) or ``2p_xv + α``
-    for ``q_x = ατ`` (131)."""
+    for ``q_x = ατ`` (131).
+
+    **Arguments** (normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``a``: the coefficient of τ (``2p_xv`` or ``2p_xv + α``); ``tau``: the normalised period.
+
+    **Returns:** ``(p_x)_{k/k-1}``, dimensionless, the broadcast shape ``(...)``.
+    """
     tau = jnp.asarray(tau)
     return 1.0 + jnp.asarray(a) * tau + tau**2
 
 
 def updated_position_variance(a: ArrayLike, tau: ArrayLike, r_x: ArrayLike) -> Array:
-    r"""``(p_x)_{k/k} = 1/(1/r_x + 1/(p_x)_{k/k-1})`` (Ho 1968, eq. (129)): the nomogram of Fig. 15."""
+    r"""``(p_x)_{k/k} = 1/(1/r_x + 1/(p_x)_{k/k-1})`` (Ho 1968, eq. (129)): the nomogram of Fig. 15.
+
+    **Arguments** (normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``a``, ``tau``: as in :func:`predicted_position_variance`; ``r_x``: the measurement-noise variance.
+
+    **Returns:** ``(p_x)_{k/k}``, dimensionless, the broadcast shape ``(...)``.
+    """
     return 1.0 / (1.0 / jnp.asarray(r_x) + 1.0 / predicted_position_variance(a, tau))
 
 
@@ -193,6 +253,12 @@ def dimensionless_period_sensitivity(a: ArrayLike, tau: ArrayLike, r_x: ArrayLik
     .. math::  \frac{τ(a + 2τ)}{[(1 + aτ + τ^2)/r_x + 1](1 + aτ + τ^2)}
 
     Invariant under the Appendix C normalisation (eq. (135)): the same number in feet.
+
+    **Arguments** (normalised, dimensionless; arrays broadcast, shape ``(...)``):
+
+    - ``a``, ``tau``: as in :func:`predicted_position_variance`; ``r_x``: the measurement-noise variance.
+
+    **Returns:** ``(Δp_x/p_x)_{k/k}/(Δτ/τ)``, dimensionless, the broadcast shape ``(...)``.
     """
     a, tau = jnp.asarray(a), jnp.asarray(tau)
     m = predicted_position_variance(a, tau)
@@ -248,6 +314,15 @@ def normalize(P_prev: ArrayLike, tau: ArrayLike, Q: ArrayLike, r: ArrayLike) -> 
 
 
 def denormalize(P: ArrayLike, scale: ArrayLike) -> Float[Array, "2 2"]:
-    """Back to dimensional units: ``N^{1/2} P N^{1/2}`` (Appendix C, inverse of (C.9))."""
+    """Back to dimensional units: ``N^{1/2} P N^{1/2}`` (Appendix C, inverse of (C.9)).
+
+    **Arguments:**
+
+    - ``P``: a normalised covariance, ``(2, 2)``, dimensionless.
+    - ``scale``: the diagonal of ``N^{1/2}``, ``(2,)``: ``sqrt(p_x*)`` (ft), ``sqrt(p_v*)`` (ft/s), as in
+      :attr:`Normalization.scale`.
+
+    **Returns:** the dimensional covariance, ``(2, 2)`` (ft², ft²/s, ft²/s²).
+    """
     s = jnp.asarray(scale)
     return jnp.asarray(P) * s[:, None] * s[None, :]

@@ -306,6 +306,11 @@ def error_transition(
     at ``T`` (with fixed gains), so a local variation ``ΔZ_{j/j}`` changes ``P_{T/T}`` by
     ``D_{T,j} ΔZ_{j/j} D_{T,j}ᵀ`` (eq. (33)).
 
+    **Arguments:**
+
+    - ``model``: the :class:`~jaxtrack.models.LinearGaussianModel`.
+    - ``history``: its :class:`~jaxtrack.covariance.CovarianceHistory` (gains ``W``, ``(num_steps, n, m)``).
+
     **Returns:** ``(T+1 steps, n, n)``: shape ``(num_steps, n, n)``.
     """
     T = history.filtered_cov.shape[0]
@@ -425,6 +430,14 @@ def first_order_variation(
     ``ΔΦ, ΔQ, ΔR, ΔH, ΔP_{0/-1}``) and ``D`` of eq. (34). Equal to the linearisation of the full
     recursion (``jax.jvp``); the exact change differs by ``O(ε²)``
     (:func:`~jaxtrack.sensitivity.exact_variation_recursion`).
+
+    **Arguments:**
+
+    - ``model``: the :class:`~jaxtrack.models.LinearGaussianModel`.
+    - ``tangent``: the variations, a model-shaped pytree (same structure and shapes as ``model``).
+    - ``num_steps``: ``T``; defaults to the model's per-step length.
+    - ``first_step``: ``"update"`` (default) or ``"predict"``, as in
+      :func:`~jaxtrack.covariance.covariance_recursion`.
 
     **Returns:** ``ΔP_{T/T}``, ``(n, n)``.
     """

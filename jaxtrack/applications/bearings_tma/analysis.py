@@ -99,6 +99,11 @@ class TrackErrors(eqx.Module):
 def track_errors(relative_estimate: ArrayLike, scenario: Scenario) -> TrackErrors:
     """Range, course and speed errors of relative-state estimates ``(..., K+1, 4)`` (A17).
 
+    **Arguments:**
+
+    - ``relative_estimate``: relative target states ``[x, y, ẋ, ẏ]``, ``(..., K+1, 4)``, m and m/s.
+    - ``scenario``: the :class:`Scenario` (the truth).
+
     **Returns:** :class:`TrackErrors`.
     """
     est = track_solution(relative_estimate, scenario.observer[:, 2:])
@@ -129,6 +134,11 @@ class ErrorStatistics(eqx.Module):
 def error_statistics(estimates: ArrayLike, scenario: Scenario) -> ErrorStatistics:
     """Statistics over the leading (run) axis of ``estimates`` ``(N, ..., K+1, 4)``.
 
+    **Arguments:**
+
+    - ``estimates``: relative-state estimates, ``(N, ..., K+1, 4)``, m and m/s.
+    - ``scenario``: the :class:`Scenario` (the truth).
+
     **Returns:** :class:`ErrorStatistics` with shapes ``(..., K+1)`` (``range_sem`` needs N ≥ 2).
     """
     err = track_errors(estimates, scenario)
@@ -141,7 +151,16 @@ def error_statistics(estimates: ArrayLike, scenario: Scenario) -> ErrorStatistic
 
 
 def sample_index(scenario: Scenario, t: float) -> int:
-    """Index ``k`` of the sample at time ``t`` (s)."""
+    """Index ``k`` of the sample at time ``t`` (s).
+
+    **Arguments:**
+
+    - ``scenario``: the :class:`Scenario`; ``t``: the time (s), a sample instant.
+
+    **Returns:** ``k``, a Python int.
+
+    **Raises:** ``InputError`` if no sample lies at ``t``.
+    """
     idx = np.flatnonzero(np.abs(np.asarray(scenario.times) - t) < 1e-9)
     if idx.size != 1:
         raise InputError(f"no sample at t = {t} s (samples every {float(scenario.sample_period):g} s).")

@@ -117,7 +117,20 @@ def monte_carlo(
     and the EKF for every ``ekf_initial_ranges`` entry (m, all > 0, A9) on the same bearings, with
     filter σ ``filter_std`` (rad), through :func:`jaxtrack.montecarlo.monte_carlo_map`.
 
+    **Arguments:**
+
+    - ``scenario``: the :class:`Scenario`; ``key``: a PRNG key; ``num_runs``: ``N ≥ 1``.
+    - ``true_std``: the simulated bearing-noise σ (rad); ``filter_std``: the filters' bearing σ (rad).
+    - ``initial_ranges``: the Table 2 initial ranges ``r̂_s(0)``, ``(P,)``, m (≥ 0).
+    - ``ekf_initial_ranges``: the EKF initial ranges, ``(E,)``, m (> 0; empty for no EKF runs).
+    - ``ekf_velocity_std``: the σ of the EKF prior's velocity (m/s).
+    - ``preaverage``: simulate raw 1-s bearings and average them (see :func:`noisy_bearings`).
+    - ``progress``: show a progress bar.
+
     **Returns:** :class:`TmaMonteCarlo`; summaries: :func:`error_statistics`.
+
+    **Raises:** ``InputError`` for ``num_runs < 1``, a negative range, a non-positive EKF range or
+    bearing σ.
     """
     if num_runs < 1:
         raise InputError(f"`num_runs` must be at least 1; got {num_runs}.")
@@ -172,7 +185,16 @@ def geometry_study(
 ) -> GeometryStudy:
     """Monte Carlo of Table 2 and the EKF on geometry ``name`` under noise configuration ``config`` (A2).
 
+    **Arguments:**
+
+    - ``name``: ``"R1"``, ``"R2"`` or ``"R3"``; ``num_runs``: ``N``; ``key``: a PRNG key.
+    - ``config``: ``"A"``, ``"B"`` or ``"C"`` (the true and filter bearing σ of ``NOISE_CONFIGS``).
+    - ``initial_ranges``, ``ekf_initial_ranges``: as in :func:`monte_carlo`, m.
+    - ``progress``: show a progress bar.
+
     **Returns:** :class:`GeometryStudy`.
+
+    **Raises:** ``InputError`` for an unknown ``config``.
     """
     if config not in NOISE_CONFIGS:
         raise InputError(f"`config` must be one of {sorted(NOISE_CONFIGS)}; got {config!r}.")
@@ -187,7 +209,16 @@ def geometry_study(
 
 
 def run_studies(num_runs: int = DEFAULT_RUNS, seed: int = 0) -> dict[str, GeometryStudy]:
-    """The Monte Carlo studies behind the table and figures: R1 under configs A, B, C; R2, R3 under A."""
+    """The Monte Carlo studies behind the table and figures: R1 under configs A, B, C; R2, R3 under A.
+
+    **Arguments:**
+
+    - ``num_runs``: runs per study (default ``DEFAULT_RUNS``).
+    - ``seed``: the integer seed of the study keys.
+
+    **Returns:** a dict of :class:`GeometryStudy` keyed ``"R1-A"``, ``"R1-B"``, ``"R1-C"``, ``"R2-A"``,
+    ``"R3-A"``.
+    """
     keys = jax.random.split(jax.random.key(seed), 5)
     return {
         "R1-A": geometry_study("R1", num_runs, keys[0]),
@@ -203,6 +234,13 @@ def leg1_collapse_factor(study: GeometryStudy, t: float = 240.0) -> float:
 
     Uses the first nonzero entry of ``initial_ranges``; on leg 1 the ratio does not depend on it
     (the estimate is exactly proportional to ``r̂_s(0)``, V13).
+
+    **Arguments:**
+
+    - ``study``: a :class:`GeometryStudy`.
+    - ``t``: the time (s), a sample instant (default 240, the end of leg 1).
+
+    **Returns:** the mean ratio, a Python float (dimensionless).
     """
     ranges = np.asarray(study.mc.initial_ranges)
     (j,) = np.flatnonzero(ranges > 0)[:1]
@@ -211,7 +249,15 @@ def leg1_collapse_factor(study: GeometryStudy, t: float = 240.0) -> float:
 
 
 def initial_range_difference(study: GeometryStudy, t: float, ranges=(10_000.0, 0.0)) -> float:
-    """Median over runs of ``|r̂(t; r̂₀=a) − r̂(t; r̂₀=b)|`` on the same noise, m (V25)."""
+    """Median over runs of ``|r̂(t; r̂₀=a) − r̂(t; r̂₀=b)|`` on the same noise, m (V25).
+
+    **Arguments:**
+
+    - ``study``: a :class:`GeometryStudy`; ``t``: the time (s), a sample instant.
+    - ``ranges``: ``(a, b)``, two entries of ``study.mc.initial_ranges``, m.
+
+    **Returns:** the median difference, a Python float, m.
+    """
     rs = list(np.asarray(study.mc.initial_ranges))
     ia, ib = rs.index(ranges[0]), rs.index(ranges[1])
     k = sample_index(study.scenario, t)
@@ -225,7 +271,16 @@ def _check_which(which: str) -> None:
 
 
 def divergence_fraction(study: GeometryStudy, which: str, t: float = 960.0, threshold: float = 0.25) -> np.ndarray:
-    """Fraction of runs with ``|range error| > threshold·r_s(t)`` at ``t`` (spec §4.4), per initial range."""
+    """Fraction of runs with ``|range error| > threshold·r_s(t)`` at ``t`` (spec §4.4), per initial range.
+
+    **Arguments:**
+
+    - ``study``: a :class:`GeometryStudy`; ``which``: ``"plkf"`` or ``"ekf"``.
+    - ``t``: the time (s), a sample instant (default 960).
+    - ``threshold``: the error bound as a fraction of the true range (default 0.25).
+
+    **Returns:** the fractions, NumPy ``(P,)`` (``"plkf"``) or ``(E,)`` (``"ekf"``).
+    """
     _check_which(which)
     mean = study.mc.plkf_mean if which == "plkf" else study.mc.ekf_mean
     k = sample_index(study.scenario, t)
@@ -238,6 +293,14 @@ def overconfident_fraction(study: GeometryStudy, which: str, t: float = 960.0, s
 
     A consistent Gaussian filter gives ~6e-7 for 5σ; a collapsed covariance (the report's EKF
     finding on geometry 2) gives far more. Per initial range.
+
+    **Arguments:**
+
+    - ``study``: a :class:`GeometryStudy`; ``which``: ``"plkf"`` or ``"ekf"``.
+    - ``t``: the time (s), a sample instant (default 960).
+    - ``sigmas``: the bound in filter σ (default 5).
+
+    **Returns:** the fractions, NumPy ``(P,)`` (``"plkf"``) or ``(E,)`` (``"ekf"``).
     """
     _check_which(which)
     mc = study.mc

@@ -50,6 +50,13 @@ def paper_rows(studies: dict[str, GeometryStudy] | None = None, num_runs: int = 
 
     Tolerances are the spec's (§5); where it gives none, half a unit of the printed digit. Monte
     Carlo rows use the spec's stated bands (about 3 standard errors).
+
+    **Arguments:**
+
+    - ``studies``: the Monte Carlo studies from :func:`~.montecarlo.run_studies` (default: run them).
+    - ``num_runs``: runs per study when ``studies`` is not given (default ``DEFAULT_RUNS``).
+
+    **Returns:** a list of :class:`~jaxtrack.applications._report.PaperRow`.
     """
     studies = run_studies(num_runs) if studies is None else studies
     rows: list[PaperRow] = []
@@ -197,7 +204,16 @@ def paper_rows(studies: dict[str, GeometryStudy] | None = None, num_runs: int = 
 
 
 def reproduce(out_dir, num_runs: int = DEFAULT_RUNS) -> tuple[list[PaperRow], list[str]]:
-    """Compute every row of :func:`paper_rows` and write the study's figures as PNG into ``out_dir``."""
+    """Compute every row of :func:`paper_rows` and write the study's figures as PNG into ``out_dir``.
+
+    **Arguments:**
+
+    - ``out_dir``: the output directory for the PNG files (created if missing).
+    - ``num_runs``: runs per Monte Carlo study (default ``DEFAULT_RUNS``).
+
+    **Returns:** ``(rows, figure_paths)``: the :class:`~jaxtrack.applications._report.PaperRow` list and
+    the written file paths (str).
+    """
     studies = run_studies(num_runs)
     rows = paper_rows(studies)
     figures = write_figures(out_dir, [

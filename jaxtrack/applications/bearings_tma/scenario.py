@@ -228,6 +228,13 @@ def observer_input(observer_states: ArrayLike, sample_period: ArrayLike) -> Arra
     For an observer track given only as sampled states (e.g. navigation data). Built scenarios
     use :attr:`Scenario.observer_input`, which integrates the path and so has no round-off on
     straight intervals.
+
+    **Arguments:**
+
+    - ``observer_states``: the sampled observer states ``[x, y, ẋ, ẏ]``, shape ``(K+1, 4)``, m and m/s.
+    - ``sample_period``: ``t_s`` (s), scalar.
+
+    **Returns:** ``u``, shape ``(K, 4)``, m and m/s.
     """
     xo = jnp.asarray(observer_states)
     phi = constant_velocity_transition(sample_period, dtype=xo.dtype)
@@ -246,10 +253,20 @@ def make_scenario(
 ) -> Scenario:
     """Sample an engagement (host-side, float64): observer ``path`` and a constant-velocity target.
 
+    **Arguments:**
+
+    - ``path``: the :class:`ObserverPath`.
     - ``target_position``: ``(r_Tx, r_Ty)`` at ``t = 0``, m; ``target_course`` rad; ``target_speed`` m/s.
     - ``num_samples``: ``K + 1``; default covers every leg, ``t = 0 … legs·leg_duration``.
     - ``num_averaged``: raw 1-s bearings per sample for pre-averaging (A3); the raw instants are
       spaced ``t_s / num_averaged`` and centred on ``t_k``.
+    - ``sample_period``: ``t_s`` (s).
+
+    **Returns:** a :class:`Scenario` with ``K + 1`` samples (observer and target states ``(K+1, 4)``,
+    m and m/s; raw bearings ``(K+1, num_averaged)``, rad).
+
+    **Raises:** ``InputError`` for a non-positive ``sample_period``, ``num_averaged < 1``,
+    ``num_samples < 2`` or a ``target_position`` not of shape ``(2,)``.
     """
     if sample_period <= 0:
         raise InputError(f"`sample_period` must be positive (s); got {sample_period}.")
@@ -299,6 +316,14 @@ def geometry_spec(name: str) -> GeometrySpec:
       (−5000, 8660.25) m (bearing 330°, 10 km) heading 120° — leg 1 runs down the line of sight.
 
     Both vehicles sail at 5.626 m/s.
+
+    **Arguments:**
+
+    - ``name``: ``"R1"``, ``"R2"`` or ``"R3"``.
+
+    **Returns:** a :class:`GeometrySpec`.
+
+    **Raises:** ``InputError`` for any other ``name``.
     """
     zigzag = tuple(math.radians(c) for c in (90, 0, 90, 0))
     if name == "R1":
@@ -312,13 +337,28 @@ def geometry_spec(name: str) -> GeometrySpec:
 
 
 def geometry(name: str, *, sample_period: float = SAMPLE_PERIOD) -> Scenario:
-    """Geometry ``name`` of :func:`geometry_spec` sampled every ``sample_period`` s (49 samples at 20 s, A1)."""
+    """Geometry ``name`` of :func:`geometry_spec` sampled every ``sample_period`` s (49 samples at 20 s, A1).
+
+    **Arguments:**
+
+    - ``name``: ``"R1"``, ``"R2"`` or ``"R3"`` (see :func:`geometry_spec`).
+    - ``sample_period``: ``t_s`` (s), default ``SAMPLE_PERIOD``.
+
+    **Returns:** a :class:`Scenario`, as from :func:`make_scenario` with every leg covered.
+    """
     spec = geometry_spec(name)
     return make_scenario(spec.path, spec.target_position, spec.target_course, sample_period=sample_period)
 
 
 def first_maneuver_index(scenario: Scenario) -> int:
-    """``k_m``: the first sample with ``V_O(k_m) ≠ V_O(k_m − 1)`` (spec §3.5 item 2)."""
+    """``k_m``: the first sample with ``V_O(k_m) ≠ V_O(k_m − 1)`` (spec §3.5 item 2).
+
+    **Arguments:**
+
+    - ``scenario``: a :class:`Scenario`.
+
+    **Returns:** ``k_m`` as a Python int; ``K + 1`` (the number of samples) if the observer never maneuvers.
+    """
     dv = np.abs(np.diff(np.asarray(scenario.observer[:, 2:]), axis=0)).max(axis=1)
     changed = np.flatnonzero(dv > 1e-9)
     return int(changed[0]) + 1 if changed.size else int(scenario.times.shape[0])
@@ -331,11 +371,16 @@ def first_maneuver_index(scenario: Scenario) -> int:
 def noisy_bearings(scenario: Scenario, key, bearing_std: ArrayLike, *, preaverage: bool = False) -> Array:
     """Measured bearings ``β_m(k) = β(k) + ν(k)`` (eq. 7), rad, ``(K+1,)``.
 
+    **Arguments:**
+
+    - ``scenario``: a :class:`Scenario`; ``key``: a PRNG key.
     - ``bearing_std``: σ of ``ν`` (rad). With ``preaverage=False`` (default, A3) it is the σ of the
       averaged sample (the report's 0.5°/√20 = 0.1118°) and the bearing is simulated directly at
       ``t_k``. With ``preaverage=True`` it is the σ of one *raw* 1-s bearing (0.5°): ``M`` raw
       bearings at the 1-s instants centred on ``t_k`` are averaged into one sample (the report's
       "averaging twenty 1-second samples"), which also smears a moving bearing slightly.
+
+    **Returns:** the measured bearings, shape ``(K+1,)``, rad.
     """
     std = jnp.asarray(bearing_std, dtype=scenario.window_bearings.dtype)
     if preaverage:
@@ -350,18 +395,40 @@ def noisy_bearings(scenario: Scenario, key, bearing_std: ArrayLike, *, preaverag
 
 
 def golden_bearing_noise(num_samples: int, bearing_std: float) -> Array:
-    """Deterministic pseudo-noise of V23: ``ν(k) = σ √2 sin(2.3 k + 0.7)``, rad, ``(K+1,)``."""
+    """Deterministic pseudo-noise of V23: ``ν(k) = σ √2 sin(2.3 k + 0.7)``, rad, ``(K+1,)``.
+
+    **Arguments:**
+
+    - ``num_samples``: ``K + 1``.
+    - ``bearing_std``: ``σ`` (rad).
+
+    **Returns:** ``ν``, shape ``(K+1,)``, rad.
+    """
     k = jnp.arange(num_samples) * 1.0
     return bearing_std * math.sqrt(2.0) * jnp.sin(2.3 * k + 0.7)
 
 
 def cross_range_noise(slant_range: ArrayLike, bearing_noise: ArrayLike) -> Array:
-    """``η = r_s sin ν`` (eq. 15): the pseudo-measurement noise of eq. (13), m."""
+    """``η = r_s sin ν`` (eq. 15): the pseudo-measurement noise of eq. (13), m.
+
+    **Arguments:**
+
+    - ``slant_range``: ``r_s`` (m); ``bearing_noise``: ``ν`` (rad). Broadcastable arrays ``(...)``.
+
+    **Returns:** ``η``, the broadcast shape ``(...)``, m.
+    """
     return jnp.asarray(slant_range) * jnp.sin(jnp.asarray(bearing_noise))
 
 
 def cross_range_noise_variance(slant_range: ArrayLike, bearing_std: ArrayLike) -> Array:
-    """``σ_η² = ½ r_s² (1 − exp(−2σ_ν²))`` (eq. 16b, exact for Gaussian ν), m²."""
+    """``σ_η² = ½ r_s² (1 − exp(−2σ_ν²))`` (eq. 16b, exact for Gaussian ν), m².
+
+    **Arguments:**
+
+    - ``slant_range``: ``r_s`` (m); ``bearing_std``: ``σ_ν`` (rad). Broadcastable arrays ``(...)``.
+
+    **Returns:** ``σ_η²``, the broadcast shape ``(...)``, m².
+    """
     r = jnp.asarray(slant_range)
     s = jnp.asarray(bearing_std)
     return 0.5 * r**2 * (1.0 - jnp.exp(-2.0 * s**2))

@@ -29,12 +29,25 @@ SEC4_P = np.array([[3422.0, 5380.0], [5380.0, 11973.0]])
 
 
 def measurement_var(taus, smoothed: bool):
-    """``R_k`` in ft²: 10⁴, or Example 2's presmoothed ``10³/τ_k`` (eq. 87) when ``smoothed``."""
+    """``R_k`` in ft²: 10⁴, or Example 2's presmoothed ``10³/τ_k`` (eq. 87) when ``smoothed``.
+
+    **Arguments:**
+
+    - ``taus``: the sampling periods ``τ_k`` (s), scalar or ``(T,)``.
+    - ``smoothed``: use Example 2's presmoothed variance.
+
+    **Returns:** ``R_k`` (ft²): the shape of ``taus`` when ``smoothed``, else the Python float 10⁴.
+    """
     return SMOOTHED_R_COEFF / taus if smoothed else 1e4
 
 
 def sample_index(times, t: float, name: str = "t") -> int:
     """Index of the sample whose time is ``t`` seconds (to 1e-9 s) among ``times`` ``(T,)`` s.
+
+    **Arguments:**
+
+    - ``times``: the sample times, ``(T,)``, s; ``t``: the time sought (s).
+    - ``name``: the argument name for the error message (default ``"t"``).
 
     **Returns:** an int. **Raises:** :class:`~jaxtrack.InputError` naming ``name`` when no sample
     is at ``t``.

@@ -93,7 +93,15 @@ class RegistrationEstimate(eqx.Module):
 
 def filter_means(Z: Array, H: Array, R: Array, prior_cov: Array) -> Float[Array, "K n"]:
     """β̂(k) of the Joseph-form registration filter from β̂_0 = 0, without input checks and
-    without raising on non-finite values (for use inside ``vmap``)."""
+    without raising on non-finite values (for use inside ``vmap``).
+
+    **Arguments:**
+
+    - ``Z``: pseudo-measurements, ``(K, 3)``, m; ``H``: measurement matrices, ``(K, 3, n)``.
+    - ``R``: pseudo-measurement noise covariances, ``(K, 3, 3)``, m²; ``prior_cov``: ``P_0``, ``(n, n)``.
+
+    **Returns:** the filtered bias estimates β̂(k), ``(K, n)``, in the units of the bias components.
+    """
     model = registration_model(H, R, prior_cov)
     return run_filter(KalmanFilter(), model, Z, save="mean", throw=False).filtered_mean
 

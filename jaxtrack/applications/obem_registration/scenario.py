@@ -100,6 +100,11 @@ def unequal_tilt_scenario(pitch2: float = -1.0 * DEG, roll2: float = -1.0 * DEG,
     """The spec's caveat scenario (§4.6 [X]): as the paper's, but platform 2 has pitch ``pitch2``
     and roll ``roll2`` (rad; default −1°, −1°) instead of +1°, +1°.
 
+    **Arguments:**
+
+    - ``pitch2``, ``roll2``: platform 2's pitch and roll biases (rad).
+    - ``num_scans``: ``K``, the number of scans (default 200).
+
     **Returns:** a :class:`Scenario`.
     """
     s = paper_scenario(num_scans)
@@ -144,7 +149,16 @@ def _cv_positions(state, accel_std, period, num_scans, key):
 
 def simulate_run(scenario: Scenario, key: PRNGKeyArray, measurement_noise: bool = True,
                  process_noise: bool = True) -> Scans:
-    """:func:`simulate_scans` without the input checks and the jit (for use inside jitted runs)."""
+    """:func:`simulate_scans` without the input checks and the jit (for use inside jitted runs).
+
+    **Arguments:**
+
+    - ``scenario``: the :class:`Scenario`; ``key``: a PRNG key.
+    - ``measurement_noise``, ``process_noise``: switch the two noise sources on (default) or off.
+
+    **Returns:** :class:`Scans` (``(2, K, 3)`` arrays: m, rad, rad for ``raw``; rad, rad, m for ``sites``;
+    m for ``target_enu``).
+    """
     k_ships, k_target, k_noise = jax.random.split(key, 3)
     dtype = scenario.ship_sites.dtype
     proc = 1.0 if process_noise else 0.0

@@ -97,6 +97,13 @@ def constraint_jacobian(sensor1: SensorGeometry, sensor2: SensorGeometry, rotati
 
     ``R21 = T_ENU(2)2ENU(1)`` (default identity: the paper's parallel frames, spec A4/§2.6).
     Columns are in m per (m, rad, rad), ordered ``(Δr1, Δψ1, Δθ1, Δr2, Δψ2, Δθ2)``.
+
+    **Arguments:**
+
+    - ``sensor1``, ``sensor2``: the :class:`SensorGeometry` of each radar (m, rad).
+    - ``rotation_21``: optional ``R21``, ``(3, 3)`` (default: identity).
+
+    **Returns:** ``J``, shape ``(3, 6)``: m per m in the range columns, m per rad in the angle columns.
     """
     a1 = _face_matrix(sensor1)
     a2 = _face_matrix(sensor2)
@@ -108,6 +115,13 @@ def bias_cost(e: ArrayLike, weights_sq: ArrayLike) -> Array:
 
     ``e`` ``(6,)`` = ``(Δr1, Δψ1, Δθ1, Δr2, Δψ2, Δθ2)``; ``weights_sq`` ``(6,)`` =
     ``(k_r1², k_ψ1², k_θ1², k_r2², k_ψ2², k_θ2²)`` (the paper prints the squares, spec A11).
+
+    **Arguments:**
+
+    - ``e``: the biases, ``(6,)``, (m, rad, rad, m, rad, rad).
+    - ``weights_sq``: the squared weights, ``(6,)`` (unitless for ranges, m²/rad² for angles).
+
+    **Returns:** ``F``, a scalar, m².
     """
     e = jnp.asarray(e)
     return 0.5 * jnp.sum(jnp.asarray(weights_sq) * e * e)
@@ -119,6 +133,13 @@ def printed_cost(e: ArrayLike, weights_sq: ArrayLike) -> Array:
     ``½ e' diag(2/k²) e`` is (14)'s quadratic form without the matrix inverse; the paper's
     optimiser minimises (13) (its e* prove it), but its tables print this number. Kept only to
     reproduce and expose that discrepancy.
+
+    **Arguments:**
+
+    - ``e``: the biases, ``(6,)``, (m, rad, rad, m, rad, rad).
+    - ``weights_sq``: the squared weights ``k²``, ``(6,)``, as in :func:`bias_cost`.
+
+    **Returns:** the printed cost, a scalar (mixed units, as printed by the paper).
     """
     e = jnp.asarray(e)
     return jnp.sum(e * e / jnp.asarray(weights_sq))
@@ -224,7 +245,16 @@ def _absolute_bias_jit(relative_bias, sensor1, sensor2, weights_sq, rotation_21,
 
 
 def bias_sensitivity(sensor1: SensorGeometry, sensor2: SensorGeometry, weights_sq: ArrayLike, rotation_21=None) -> Array:
-    """Analytic ``∂e*/∂B_R = D⁻¹ J' S_c⁻¹`` ``(6, 3)`` (spec §2.4); e* is linear in B_R."""
+    """Analytic ``∂e*/∂B_R = D⁻¹ J' S_c⁻¹`` ``(6, 3)`` (spec §2.4); e* is linear in B_R.
+
+    **Arguments:**
+
+    - ``sensor1``, ``sensor2``: the :class:`SensorGeometry` of each radar (m, rad).
+    - ``weights_sq``: the squared weights, ``(6,)``, as in :func:`bias_cost`.
+    - ``rotation_21``: optional ``R21``, ``(3, 3)`` (default: identity).
+
+    **Returns:** ``∂e*/∂B_R``, shape ``(6, 3)``: unitless in the range rows, rad/m in the angle rows.
+    """
     jac = constraint_jacobian(sensor1, sensor2, rotation_21)
     w = jnp.asarray(weights_sq, dtype=jac.dtype)
     jd = jac / w[None, :]

@@ -194,6 +194,13 @@ def simulate_biased(model: LinearGaussianModel, num_estimated: int, key: PRNGKey
     x(0) ~ N(x̂(0|0), P0) and λ ~ N(λ̄, Λ) are drawn **once** from the prior (spec A23); with
     ``bias`` given, λ is that value (differentiable). ``W u(x(k), λ)`` is in every measurement.
 
+    **Arguments:**
+
+    - ``model``: the augmented model, state ``[x, λ]`` with ``n + p`` components.
+    - ``num_estimated``: ``n``, the estimated states (the last ``p`` are the bias λ).
+    - ``key``: a PRNG key; ``num_steps``: ``T``.
+    - ``bias``: optional λ, ``(p,)``, in the measurement's units (default: drawn from the prior).
+
     **Returns:** a :class:`BiasedTrajectory`.
     """
     return _simulate_jit(model, num_estimated, key, num_steps, bias)
@@ -226,6 +233,14 @@ def estimation_errors(model: LinearGaussianModel, num_estimated: int, key: PRNGK
     :func:`jaxtrack.filters.run_filter` (optimal gains (69), or ``gains`` ``(T, n, q)``).
     Differentiable in ``bias``: ``jax.jacfwd`` gives ∂ε(k|k)/∂λ, which equals D(k|k) (V28).
 
+    **Arguments:**
+
+    - ``model``: the augmented model, state ``[x, λ]`` with ``n + p`` components.
+    - ``num_estimated``: ``n``, the estimated states.
+    - ``key``: a PRNG key; ``num_steps``: ``T``.
+    - ``bias``: optional λ, ``(p,)`` (default: drawn from the prior).
+    - ``gains``: optional filter gains ``(T, n, q)`` (default: the optimal gains).
+
     **Returns:** an :class:`EstimationErrors`.
     """
     return _errors_jit(model, ConsiderKalmanFilter(num_estimated, gains), key, num_steps, bias)
@@ -243,6 +258,14 @@ def terminal_error_moments(key: PRNGKeyArray, args) -> tuple[Array, Array, Array
 
     ``args = (model, filter)`` with a :class:`~jaxtrack.filters.ConsiderKalmanFilter` holding the
     gains ``(T, n, q)`` (their length is the number of steps).
+
+    **Arguments:**
+
+    - ``key``: the run's PRNG key.
+    - ``args``: ``(model, filter)``, as above.
+
+    **Returns:** ``(ε, ε ε', ε Δλ')`` at step ``T``: shapes ``(n,)``, ``(n, n)``, ``(n, p)``, in the state's
+    units (``Δλ = λ − λ̄``).
     """
     model, filter = args
     n = filter.num_estimated

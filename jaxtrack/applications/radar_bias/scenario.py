@@ -73,6 +73,10 @@ class ExampleInputs(eqx.Module):
 def example_inputs(name: str) -> ExampleInputs:
     """The inputs of paper example ``name`` ∈ {a, b, c, d} (parallel ENU frames, as in the paper).
 
+    **Arguments:**
+
+    - ``name``: ``"a"``, ``"b"``, ``"c"`` or ``"d"``.
+
     **Returns:** an :class:`ExampleInputs`. **Raises:** :class:`~jaxtrack.InputError` for an unknown name.
     """
     if name not in EXAMPLES:
@@ -84,7 +88,15 @@ def example_inputs(name: str) -> ExampleInputs:
 
 
 def solve_example(name: str, method: str = "compact") -> AbsoluteBias:
-    """Solve paper example ``name`` with :func:`~.absolute.absolute_bias` (``method`` as there)."""
+    """Solve paper example ``name`` with :func:`~.absolute.absolute_bias` (``method`` as there).
+
+    **Arguments:**
+
+    - ``name``: ``"a"``, ``"b"``, ``"c"`` or ``"d"``.
+    - ``method``: ``"compact"`` (default), ``"paper"`` or ``"kkt"``.
+
+    **Returns:** an :class:`~.absolute.AbsoluteBias`.
+    """
     ex = example_inputs(name)
     return absolute_bias(ex.relative_bias, ex.sensor1, ex.sensor2, ex.weights_sq, method=method)
 
@@ -232,5 +244,13 @@ NUM_ESTIMATED = 2
 
 
 def general_scenario(bias_var: float = 25.0) -> LinearGaussianModel:
-    """The spec's general-case scenario (V23–V26) with bias variance Λ (m²); state ``[p, v, λ]``."""
+    """The spec's general-case scenario (V23–V26) with bias variance Λ (m²); state ``[p, v, λ]``.
+
+    **Arguments:**
+
+    - ``bias_var``: the bias variance ``Λ`` (m²), default 25.
+
+    **Returns:** a :class:`~jaxtrack.models.LinearGaussianModel` with state ``[p, v, λ]`` (m, m/s, m) and
+    a scalar position measurement (m); ``T = 1`` s.
+    """
     return alpha_beta_bias_model(bias_var=bias_var, **GENERAL_SCENARIO)

@@ -29,18 +29,41 @@ def _real(x) -> Array:
 
 
 def alpha_beta_gain(alpha, beta, period) -> Array:
-    """``K̄ = [α, β/T]'`` (79), shape ``(2, 1)``; α unitless, β/T in 1/s."""
+    """``K̄ = [α, β/T]'`` (79), shape ``(2, 1)``; α unitless, β/T in 1/s.
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: the sampling period ``T`` (s), scalar.
+
+    **Returns:** ``K̄``, shape ``(2, 1)``: ``[α, β/T]'`` (unitless, 1/s).
+    """
     return jnp.stack([_real(alpha), beta / period])[:, None]
 
 
 def steady_state_transition(alpha, beta, period) -> Array:
-    """``F̄ = (I − K̄H) Φ = [[1−α, (1−α)T], [−β/T, 1−β]]`` (81); ``tr = 2−α−β``, ``det = 1−α``."""
+    """``F̄ = (I − K̄H) Φ = [[1−α, (1−α)T], [−β/T, 1−β]]`` (81); ``tr = 2−α−β``, ``det = 1−α``.
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless); ``period``: the sampling period ``T`` (s).
+      Scalars, or broadcastable arrays ``(...)``.
+
+    **Returns:** ``F̄``, shape ``(2, 2)`` (``(2, 2, ...)`` for broadcast inputs ``(...)``).
+    """
     a, b, t = jnp.broadcast_arrays(*(_real(v) for v in (alpha, beta, period)))
     return jnp.stack([jnp.stack([1 - a, (1 - a) * t]), jnp.stack([-b / t, 1 - b])])
 
 
 def steady_state_eigenvalues(alpha, beta) -> Array:
-    """``λ_{1,2} = 1 − (α+β)/2 ± ½ sqrt(α² + 2αβ + β² − 4β)`` (82), complex ``(2,)``."""
+    """``λ_{1,2} = 1 − (α+β)/2 ± ½ sqrt(α² + 2αβ + β² − 4β)`` (82), complex ``(2,)``.
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+
+    **Returns:** the two eigenvalues of ``F̄``, complex, shape ``(2,)`` (``+`` root first).
+    """
     a = _real(alpha)
     b = _real(beta)
     root = jnp.sqrt((a * a + 2 * a * b + b * b - 4 * b).astype(jnp.result_type(a, b, 1j)))
@@ -52,6 +75,13 @@ def noise_covariance_from_measurement(alpha, beta, period, meas_var) -> Array:
     """``M̄_N`` (88), the measurement-noise part of the steady-state filtered covariance, ``(2, 2)``.
 
     ``N/(α(4−2α−β)) · [[2α² + 2β − 3αβ, β(2α−β)/T], [β(2α−β)/T, 2β²/T²]]``; solves (86).
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: the sampling period ``T`` (s); ``meas_var``: the measurement-noise variance ``N`` (m²).
+
+    **Returns:** ``M̄_N``, shape ``(2, 2)``, in m², m²/s, (m/s)² (position/velocity blocks).
     """
     a, b, t = alpha, beta, period
     c = meas_var / (a * (4 - 2 * a - b))
@@ -63,6 +93,13 @@ def noise_covariance_from_plant(alpha, beta, period, q22) -> Array:
     """``M̄_Q`` (92)–(93), the plant-noise part of the steady-state filtered covariance, ``(2, 2)``.
 
     ``q22/(αβ(4−2α−β)) · [[T²(1−α)²(2−α), T(1−α)(2α−α²−β)], [·, 2β(1−α) + α²(2−α)]]``; solves (87).
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: the sampling period ``T`` (s); ``q22``: the plant-noise variance on velocity ((m/s)²).
+
+    **Returns:** ``M̄_Q``, shape ``(2, 2)``, in m², m²/s, (m/s)² (position/velocity blocks).
     """
     a, b, t = alpha, beta, period
     c = q22 / (a * b * (4 - 2 * a - b))
@@ -72,7 +109,15 @@ def noise_covariance_from_plant(alpha, beta, period, q22) -> Array:
 
 
 def lyapunov_system(alpha, beta, period) -> Array:
-    """The 3×3 matrix of (89)–(91) acting on ``(m̄11Q, m̄12Q, m̄22Q)``; its determinant is ``αβ(4−2α−β)``."""
+    """The 3×3 matrix of (89)–(91) acting on ``(m̄11Q, m̄12Q, m̄22Q)``; its determinant is ``αβ(4−2α−β)``.
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: the sampling period ``T`` (s).
+
+    **Returns:** the system matrix, shape ``(3, 3)``.
+    """
     a, b, t = alpha, beta, period
     g = (1 - a) ** 2
     return jnp.stack([
@@ -83,7 +128,16 @@ def lyapunov_system(alpha, beta, period) -> Array:
 
 
 def predicted_noise_covariance_terms(alpha, beta, period, meas_var, q22) -> tuple[Array, Array]:
-    """Closed forms of ``Φ M̄_N Φ'`` and ``Φ M̄_Q Φ'`` in (96), each ``(2, 2)``."""
+    """Closed forms of ``Φ M̄_N Φ'`` and ``Φ M̄_Q Φ'`` in (96), each ``(2, 2)``.
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: the sampling period ``T`` (s); ``meas_var``: ``N`` (m²); ``q22``: the plant-noise
+      variance on velocity ((m/s)²).
+
+    **Returns:** ``(Φ M̄_N Φ', Φ M̄_Q Φ')``, each shape ``(2, 2)``, in m², m²/s, (m/s)².
+    """
     a, b, t = alpha, beta, period
     cn = meas_var / (a * (4 - 2 * a - b))
     off_n = b * (2 * a + b) / t
@@ -122,6 +176,15 @@ def steady_state(alpha, beta, period, meas_var, q22, bias_var=0.0) -> SteadyStat
     """All steady-state closed forms (80)–(98) for gains (α, β), period T (s), N (m²), q22 ((m/s)²), Λ (m²).
 
     Valid inside the stability triangle ``0 < α < 2``, ``β > 0``, ``4 − 2α − β > 0`` (spec §3.5).
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: the sampling period ``T`` (s); ``meas_var``: the measurement-noise variance ``N`` (m²).
+    - ``q22``: the plant-noise variance on velocity ((m/s)²).
+    - ``bias_var``: the variance ``Λ`` of the constant measurement bias (m²), default 0.
+
+    **Returns:** a :class:`SteadyState` (``(2, 2)`` covariances, ``(2, 1)`` gain and sensitivities).
     """
     a, b, t, n, q, lam = (_real(v) for v in (alpha, beta, period, meas_var, q22, bias_var))
     gain = alpha_beta_gain(a, b, t)
@@ -149,6 +212,14 @@ def gain_condition_residuals(alpha, beta, period, meas_var, q22, bias_var=0.0) -
     ``(G1) α(Ṡ11 + N − Λ) − (Ṡ11 − Λ)`` and ``(G2) β(Ṡ11 + N − Λ) − T Ṡ12`` (spec §3.8, with the
     A20 correction), which equal ``α(Ṁ11+N) − Ṁ11`` and ``β(Ṁ11+N) − TṀ12``: Λ cancels. Both are
     zero only at the jointly optimal gain; the paper's relation (104) only zeroes their ratio.
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: ``T`` (s); ``meas_var``: ``N`` (m²); ``q22``: plant-noise variance on velocity ((m/s)²).
+    - ``bias_var``: the bias variance ``Λ`` (m²), default 0.
+
+    **Returns:** ``[G1, G2]``, shape ``(2,)``, m².
     """
     ss = steady_state(alpha, beta, period, meas_var, q22, bias_var)
     s_dot = ss.predicted_total_cov
@@ -159,7 +230,15 @@ def gain_condition_residuals(alpha, beta, period, meas_var, q22, bias_var=0.0) -
 
 
 def noise_ratio(period, meas_var, q22) -> Array:
-    """``ρ = q22 T² / N`` (unitless), the only parameter of the steady-state gain."""
+    """``ρ = q22 T² / N`` (unitless), the only parameter of the steady-state gain.
+
+    **Arguments:**
+
+    - ``period``: ``T`` (s); ``meas_var``: ``N`` (m²); ``q22``: plant-noise variance on velocity
+      ((m/s)²). Scalars or broadcastable arrays ``(...)``.
+
+    **Returns:** ``ρ``, unitless, the broadcast shape ``(...)``.
+    """
     return q22 * period**2 / meas_var
 
 
@@ -170,6 +249,13 @@ def paper_quartic(beta, alpha, rho) -> Array:
 
     It is the *ratio* of the two gain conditions (G1)/(G2), necessary but not sufficient for
     optimality (spec A26, §3.9).
+
+    **Arguments:**
+
+    - ``beta``, ``alpha``: the gains (unitless); ``rho``: the noise ratio ``ρ`` (unitless).
+      Scalars or broadcastable arrays ``(...)``.
+
+    **Returns:** the value of (104), the broadcast shape ``(...)``.
     """
     a, b = alpha, beta
     return (2 * b**4 + (4 * a - 8) * b**3
@@ -177,7 +263,15 @@ def paper_quartic(beta, alpha, rho) -> Array:
 
 
 def paper_quartic_factored(beta, alpha, rho) -> Array:
-    """(105): ``(β + 2α − 4)(2β³ + ρ((α²−2α+2)β + α²(α−2)))``, equal to (104)."""
+    """(105): ``(β + 2α − 4)(2β³ + ρ((α²−2α+2)β + α²(α−2)))``, equal to (104).
+
+    **Arguments:**
+
+    - ``beta``, ``alpha``: the gains (unitless); ``rho``: the noise ratio ``ρ`` (unitless).
+      Scalars or broadcastable arrays ``(...)``.
+
+    **Returns:** the value of (105), the broadcast shape ``(...)``.
+    """
     a, b = alpha, beta
     return (b + 2 * a - 4) * (2 * b**3 + rho * ((a**2 - 2 * a + 2) * b + a**2 * (a - 2)))
 
@@ -189,6 +283,13 @@ def paper_beta(alpha, rho) -> Array:
     With ``a = α²−2α+2 > 0`` and ``b0 = α²(α−2) < 0`` for ``0 < α < 2`` the cubic is strictly
     increasing, so Cardano's formula for the depressed cubic ``β³ + pβ + q = 0`` (``p = ρa/2 > 0``)
     gives the single real root; two Newton steps polish it to machine precision. Differentiable.
+
+    **Arguments:**
+
+    - ``alpha``: the position gain, ``0 < α < 2`` (unitless); ``rho``: the noise ratio ``ρ > 0``.
+      Scalars or broadcastable arrays ``(...)``.
+
+    **Returns:** ``β`` (unitless), the broadcast shape ``(...)``.
     """
     a_ = _real(alpha)
     r = _real(rho)
@@ -203,7 +304,14 @@ def paper_beta(alpha, rho) -> Array:
 
 
 def paper_quartic_real_roots(alpha: float, rho: float) -> np.ndarray:
-    """The real roots of (104) in β, ascending (host-side ``numpy.roots``; for tables and tests)."""
+    """The real roots of (104) in β, ascending (host-side ``numpy.roots``; for tables and tests).
+
+    **Arguments:**
+
+    - ``alpha``: the position gain (unitless); ``rho``: the noise ratio ``ρ`` (unitless). Python floats.
+
+    **Returns:** a NumPy array ``(r,)``, ``r ≤ 4``, of the real roots β, ascending.
+    """
     a = alpha
     coeffs = [2.0, 4 * a - 8, rho * (a**2 - 2 * a + 2), rho * (3 * a**3 - 10 * a**2 + 12 * a - 8),
               rho * (2 * a**4 - 8 * a**3 + 8 * a**2)]
@@ -252,6 +360,16 @@ def steady_state_objective(alpha, beta, period, meas_var, q22, objective: str = 
     """``tr M̄``, ``M̄11`` or ``M̄22`` (94) at gains (α, β): the quantities the gain design minimises.
 
     ``objective`` is ``"trace"``, ``"position"`` (M̄11, m²) or ``"velocity"`` (M̄22, (m/s)²).
+
+    **Arguments:**
+
+    - ``alpha``, ``beta``: the α-β gains (unitless), scalars.
+    - ``period``: ``T`` (s); ``meas_var``: ``N`` (m²); ``q22``: plant-noise variance on velocity ((m/s)²).
+    - ``objective``: ``"trace"`` (default), ``"position"`` or ``"velocity"``.
+
+    **Returns:** the objective, a scalar (m², (m/s)², or their sum for ``"trace"``).
+
+    **Raises:** ``InputError`` for an unknown ``objective``.
     """
     if objective not in _OBJECTIVES:
         raise InputError(f"`objective` must be one of {_OBJECTIVES}; got {objective!r}.")
@@ -341,6 +459,15 @@ def nonoptimality_table(period: float = 1.0, meas_var: float = 1.0) -> list[dict
     conditions (both 0 only at the optimum), (104) itself (0 at the paper's point: it is only their
     ratio), the steady-state position variance M̄11 at the paper's point and at the optimum
     (α*, β*) of the same ρ, in m² for the given T (s) and N (m²), and their ratio.
+
+    **Arguments:**
+
+    - ``period``: the sampling period ``T`` (s), default 1.
+    - ``meas_var``: the measurement-noise variance ``N`` (m²), default 1.
+
+    **Returns:** a list of dicts, one per row of ``PAPER_BETA_TABLE``, with keys ``rho``, ``alpha``,
+    ``beta_printed``, ``beta``, ``G1``, ``G2``, ``paper_relation_104``, ``alpha_opt``, ``beta_opt``,
+    ``position_var_paper``, ``position_var_opt``, ``position_var_ratio`` (Python floats).
     """
     rows = []
     for rho, alpha, beta_printed, _ in PAPER_BETA_TABLE:
