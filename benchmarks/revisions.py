@@ -120,6 +120,7 @@ def main():
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--json", metavar="PATH")
+    parser.add_argument("--only", nargs="*", help="run only the jobs whose names contain one of these words")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         old = load_old(args.old, folder)
@@ -135,6 +136,8 @@ def main():
         report = {"old": args.old, "runs": runs, "steps": steps, "jobs": {}}
         total = runs * steps
         for name in new_jobs:
+            if args.only and not any(w in name for w in args.only):
+                continue
             diff = float(np.max(np.abs(np.asarray(new_jobs[name]()) - np.asarray(old_jobs[name]()))))
             times = race({"new": (new_jobs[name], 1.0), "old": (old_jobs[name], 1.0)}, args.repeats)
             new, oldr = total / times["new"] / 1e6, total / times["old"] / 1e6

@@ -40,7 +40,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from .._validation import InputError, check_covariance, check_finite, check_shape
 from ..models import LinearGaussianModel, at_step
 from ._base import AbstractFilter
-from ._kalman import KalmanFilter, _predict_linearized
+from ._kalman import KalmanFilter, _predict_linearized, checked_gain
 from ._linalg import cholesky_and_inverse, matmul
 from ._updates import JosephForm, condition_linearized, masked_noise, symmetrize
 
@@ -120,12 +120,8 @@ class ConsiderKalmanFilter(AbstractFilter):
     def __init__(self, num_estimated: int, gain: ArrayLike | None = None):
         if isinstance(num_estimated, bool) or not isinstance(num_estimated, int) or num_estimated < 1:
             raise InputError(f"`num_estimated` must be a positive int; got {num_estimated!r}.")
-        if gain is not None:
-            gain = jnp.asarray(gain)
-            check_shape("gain", gain, [(num_estimated, None), (None, num_estimated, None)])
-            check_finite("gain", gain)
         self.num_estimated = num_estimated
-        self.gain = gain
+        self.gain = None if gain is None else checked_gain(gain, num_estimated)
 
     def check_model(self, model):
         if not isinstance(model, LinearGaussianModel):

@@ -14,6 +14,20 @@ from ._updates import AbstractUpdateForm, JosephForm, condition_linearized
 from ._linalg import matmul
 
 
+def checked_gain(gain: ArrayLike, rows: int | None = None) -> Array:
+    """A supplied fixed gain as a finite array of shape ``(rows, m)`` or per step ``(T, rows, m)``.
+
+    **Arguments:** ``gain`` the gain; ``rows`` the number of gain rows if known (the state
+    dimension, or the number of estimated states of a consider filter).
+
+    **Returns:** ``gain`` as a jax array. **Raises:** ``InputError`` naming ``gain``.
+    """
+    gain = jnp.asarray(gain)
+    check_shape("gain", gain, [(rows, None), (None, rows, None)])
+    check_finite("gain", gain)
+    return gain
+
+
 def _predict_linearized(model, mean, cov, k, jacobian):
     Q = model.process_noise_cov(k)
     return model.transition(mean, k), matmul(matmul(jacobian, cov), jacobian.T) + Q
@@ -57,10 +71,7 @@ class KalmanFilter(AbstractFilter):
                     f"`gain` was given with form={type(form).__name__}(), which is valid only for "
                     f"the optimal gain; use JosephForm() (the default) with a supplied gain."
                 )
-            gain = jnp.asarray(gain)
-            check_shape("gain", gain, [(None, None), (None, None, None)])
-            check_finite("gain", gain)
-        self.gain = gain
+        self.gain = None if gain is None else checked_gain(gain)
         self.form = form
 
     def check_model(self, model):

@@ -81,6 +81,13 @@ def _num_steps_of(**arrays_and_ndims) -> int | None:
     return next(iter(steps.values()), None)
 
 
+def _as_float_arrays(*arrays):
+    """The arrays as jax arrays of one floating dtype (the promotion of theirs and ``float``)."""
+    arrays = [jnp.asarray(a) for a in arrays]
+    dtype = jnp.result_type(*arrays, float)
+    return tuple(a.astype(dtype) for a in arrays)
+
+
 def _check_noise_and_prior(Q, R, m0, P0, angle_components) -> None:
     """Shape and value checks shared by every model: prior, plant noise, measurement noise."""
     check_shape("initial_mean", m0, [(None,)])
@@ -209,14 +216,10 @@ class LinearGaussianModel(AbstractStateSpaceModel):
         transition_offset: ArrayLike | None = None,
         angle_components: tuple[int, ...] = (),
     ):
-        F = jnp.asarray(transition_matrix)
-        Q = jnp.asarray(process_noise_cov)
-        H = jnp.asarray(measurement_matrix)
-        R = jnp.asarray(measurement_noise_cov)
-        m0 = jnp.asarray(initial_mean)
-        P0 = jnp.asarray(initial_cov)
-        dtype = jnp.result_type(F, Q, H, R, m0, P0, float)
-        F, Q, H, R, m0, P0 = (a.astype(dtype) for a in (F, Q, H, R, m0, P0))
+        F, Q, H, R, m0, P0 = _as_float_arrays(
+            transition_matrix, process_noise_cov, measurement_matrix, measurement_noise_cov, initial_mean,
+            initial_cov)
+        dtype = F.dtype
 
         _check_noise_and_prior(Q, R, m0, P0, angle_components)
         n, m = m0.shape[0], R.shape[-1]
@@ -331,12 +334,7 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
         measurement_jacobian_fn: Callable | None = None,
         angle_components: tuple[int, ...] = (),
     ):
-        Q = jnp.asarray(process_noise_cov)
-        R = jnp.asarray(measurement_noise_cov)
-        m0 = jnp.asarray(initial_mean)
-        P0 = jnp.asarray(initial_cov)
-        dtype = jnp.result_type(Q, R, m0, P0, float)
-        Q, R, m0, P0 = (a.astype(dtype) for a in (Q, R, m0, P0))
+        Q, R, m0, P0 = _as_float_arrays(process_noise_cov, measurement_noise_cov, initial_mean, initial_cov)
         for name, fn in (("transition_fn", transition_fn), ("measurement_fn", measurement_fn)):
             if not callable(fn):
                 raise InputError(f"`{name}` must be a callable f(x, k); got {type(fn).__name__}.")
