@@ -26,11 +26,19 @@ run: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/jaxtrack demo --out results/demo
 
+# The suite runs in three pytest processes: the fault-injection cases (which run JAX in worker
+# threads, some ending in runtime errors raised from XLA callbacks) and the property tests (many
+# compilations) each get a fresh process, so nothing they leave behind can reach other tests.
+ISOLATED := tests/test_faults.py tests/test_properties.py
+
 test: $(STAMP)
-	$(BIN)/pytest $(PYTEST_ARGS)
+	$(BIN)/pytest $(PYTEST_ARGS) $(addprefix --ignore=,$(ISOLATED))
+	$(BIN)/pytest $(PYTEST_ARGS) tests/test_faults.py
+	$(BIN)/pytest $(PYTEST_ARGS) tests/test_properties.py
 
 test-slow: $(STAMP)
-	$(BIN)/pytest --runslow $(PYTEST_ARGS)
+	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(addprefix --ignore=,$(ISOLATED))
+	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(ISOLATED)
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

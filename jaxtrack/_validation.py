@@ -174,3 +174,42 @@ def check_covariance(name: str, x, *, definite: bool = True) -> None:
                 f"`{name}` must be positive semidefinite{_matrix_label(x, i)}; the smallest "
                 f"eigenvalue of its correlation matrix is {smallest[i]:.3g}."
             )
+
+
+def covariance_ok(x, *, definite: bool = True):
+    """Traceable twin of :func:`check_covariance`: a JAX bool, True when ``x`` passes.
+
+    For use under ``jit``/``vmap``/``grad``, where :func:`check_covariance` cannot look at the
+    value: the result feeds a status flag (``ok``) or an ``equinox.error_if``. The criteria are
+    those of :func:`check_covariance` (finite, symmetric to 1e-8 relative, diagonal positive (or
+    non-negative with ``definite=False``), smallest eigenvalue of the matrix or of its
+    correlation-scaled form positive, or above ``-1e-10`` for semidefinite). One batched
+    ``eigvalsh`` per call, so call it once per run, never inside a per-step loop.
+
+    **Arguments:**
+
+    - ``x``: a matrix ``(d, d)`` or stack ``(..., d, d)``, in any units.
+    - ``definite``: require positive definite (default) or only positive semidefinite.
+
+    **Returns:** a JAX bool scalar (no gradient flows through it).
+    """
+    a = jax.lax.stop_gradient(jnp.asarray(x))
+    stack = a.reshape((-1,) + a.shape[-2:])
+    finite = jnp.all(jnp.isfinite(stack))
+    # Replace non-finite entries so eigvalsh sees a valid matrix; `finite` already says False.
+    stack = jnp.where(jnp.isfinite(stack), stack, 0.0)
+    scale = jnp.maximum(jnp.max(jnp.abs(stack), axis=(-1, -2)), jnp.finfo(stack.dtype).tiny)
+    asym = jnp.max(jnp.abs(stack - jnp.swapaxes(stack, -1, -2)), axis=(-1, -2))
+    symmetric = jnp.all(asym <= 1e-8 * scale)
+    stack = 0.5 * (stack + jnp.swapaxes(stack, -1, -2))
+    diag = jnp.diagonal(stack, axis1=-2, axis2=-1)
+    diag_ok = jnp.all(diag > 0) if definite else jnp.all(diag >= 0)
+    inv_sd = jnp.where(diag > 0, 1.0 / jnp.sqrt(jnp.where(diag > 0, diag, 1.0)), 1.0)
+    corr = stack * inv_sd[..., :, None] * inv_sd[..., None, :]
+    smallest = jnp.linalg.eigvalsh(corr)[:, 0]
+    raw = jnp.linalg.eigvalsh(stack)[:, 0]
+    if definite:
+        eig_ok = jnp.all((smallest > 0.0) | (raw > 0.0))
+    else:
+        eig_ok = jnp.all((smallest >= -1e-10) | (raw >= -1e-10 * scale))
+    return finite & symmetric & diag_ok & eig_ok

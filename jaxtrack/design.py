@@ -24,6 +24,7 @@ same numbers).
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Literal, NamedTuple
 
@@ -55,9 +56,26 @@ __all__ = [
     "allocate_rates",
     "ManeuverCompensation",
     "maneuver_period_change",
+    "NotConvergedWarning",
 ]
 
 Objective = Literal["terminal", "running"]
+
+
+class NotConvergedWarning(RuntimeWarning):
+    """An iterative design stopped at its iteration cap before meeting its stopping rule.
+
+    Every loop in this module is capped (``max_iter``, ``steps``, or a bound derived from the
+    input). :func:`newton_uniform_period` reports non-convergence in its ``converged`` field;
+    :func:`segment_exchange` and :func:`local_search`, whose results are plain tuples, issue this
+    warning instead (their result is still the best scheme found).
+    """
+
+
+def _check_max_iter(max_iter) -> int:
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise InputError(f"`max_iter` must be a positive int; got {max_iter!r}.")
+    return int(max_iter)
 
 
 def _weight(weight, n) -> Array:
@@ -113,8 +131,11 @@ def newton_uniform_period(
         raise InputError(f"`sensitivity` must be 'sample-fixed' or 'time-fixed'; got {sensitivity!r}.")
     if not 0 < step_factor <= 1:
         raise InputError(f"`step_factor` (λ) must be in (0, 1]; got {step_factor}.")
-    if target <= 0:
-        raise InputError(f"`target` (J*) must be positive; got {target}.")
+    if not (np.isfinite(target) and target > 0):
+        raise InputError(f"`target` (J*) must be positive and finite; got {target}.")
+    if not (np.isfinite(tau0) and tau0 > 0):
+        raise InputError(f"`tau0` must be positive and finite; got {tau0}.")
+    max_iter = _check_max_iter(max_iter)
     L = _weight(weight, model_fn(jnp.asarray(tau0)).state_dim)
 
     def cost_and_slope(tau):
@@ -265,8 +286,12 @@ def segment_exchange(
 
     **Returns:** ``(counts, costs)`` — the final scheme and ``J`` after each accepted move.
 
-    **Raises:** ``InputError`` for an unknown ``condition``.
+    **Raises:** ``InputError`` for an unknown ``condition`` or a ``max_iter`` below 1. Issues
+    :class:`NotConvergedWarning` when a move still helped at the ``max_iter``-th pass.
     """
+    if condition not in ("count-gradient", "equal-s"):
+        raise InputError(f"`condition` must be 'count-gradient' or 'equal-s'; got {condition!r}.")
+    max_iter = _check_max_iter(max_iter)
     counts = list(problem.check(counts))
     costs = [problem.cost(counts)]
     for _ in range(max_iter):
@@ -294,6 +319,9 @@ def segment_exchange(
                 break
         if not improved:
             break
+    else:
+        warnings.warn(f"segment_exchange: still improving after `max_iter` = {max_iter} passes; the "
+                      "scheme returned is the best so far, not a local optimum.", NotConvergedWarning, stacklevel=2)
     return tuple(counts), costs
 
 
@@ -307,7 +335,8 @@ def _compositions(total: int, parts: int, lo: int, hi: int) -> np.ndarray:
     return np.array(rows, dtype=int)
 
 
-def exhaustive_counts(problem: SegmentProblem, total: int, *, lo: int = 1, hi: int | None = None, chunk: int = 4096) -> tuple[tuple[int, ...], float, int]:
+def exhaustive_counts(problem: SegmentProblem, total: int, *, lo: int = 1, hi: int | None = None, chunk: int = 4096,
+                      max_schemes: int = 10_000_000) -> tuple[tuple[int, ...], float, int]:
     """Brute-force integer optimum: ``J`` of every scheme with ``Σn_i = total``, ``lo ≤ n_i ≤ hi``,
     evaluated in vmapped chunks. **Returns:** ``(counts, J, number_of_schemes)``.
 
@@ -316,10 +345,18 @@ def exhaustive_counts(problem: SegmentProblem, total: int, *, lo: int = 1, hi: i
     - ``problem``: the :class:`SegmentProblem`; ``total``: ``Σn_i``.
     - ``lo``, ``hi``: the bounds on each ``n_i`` (``hi`` defaults to ``total``).
     - ``chunk``: schemes per vmapped evaluation.
+    - ``max_schemes``: the most candidate vectors ``(hi − lo + 1)^(S−1)`` to enumerate; beyond it
+      the search would run for hours, so it is refused.
 
-    **Raises:** ``InputError`` if no scheme satisfies the bounds.
+    **Raises:** ``InputError`` if no scheme satisfies the bounds or the search exceeds ``max_schemes``.
     """
     hi = total if hi is None else hi
+    if lo > hi:
+        raise InputError(f"`lo` must not exceed `hi`; got lo={lo}, hi={hi}.")
+    candidates = (hi - lo + 1) ** (problem.num_segments - 1)
+    if candidates > max_schemes:
+        raise InputError(f"`total`/`hi` give {candidates:.3g} candidate schemes, above `max_schemes` = "
+                         f"{max_schemes}; narrow [lo, hi] or use relaxed_segment_design.")
     schemes = _compositions(total, problem.num_segments, lo, hi)
     if len(schemes) == 0:
         raise InputError(f"no scheme of {problem.num_segments} segments in [{lo}, {hi}] sums to {total}.")
@@ -426,6 +463,10 @@ def relaxed_segment_design(
         raise InputError(f"`total` = {total} is infeasible with {S} segments in [{lo}, {hi}].")
     if objective not in ("terminal", "running"):
         raise InputError(f"`objective` must be 'terminal' or 'running'; got {objective!r}.")
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise InputError(f"`steps` must be a positive int; got {steps!r}.")
+    if init is not None and (np.shape(init) != (S,) or not np.all(np.isfinite(np.asarray(init, float)))):
+        raise InputError(f"`init` must be {S} finite counts; got {init!r}.")
     x0 = jnp.full(S, total / S) if init is None else jnp.asarray(init, dtype=float)
     x, hist, J = _relaxed_run(problem, x0, float(total), float(lo), int(hi), objective, int(steps), float(learning_rate))
     return RelaxedDesign(np.asarray(x), float(J), np.asarray(hist))
@@ -457,28 +498,58 @@ def round_counts(counts: ArrayLike, total: int, lo: int = 1, hi: int | None = No
 
     **Arguments:**
 
-    - ``counts``: continuous counts, shape ``(S,)``.
+    - ``counts``: continuous counts, shape ``(S,)``, finite.
     - ``total``: the required sum; ``lo``, ``hi``: the bounds on each count (``hi`` defaults to ``total``).
 
     **Returns:** the integer counts, a tuple of ``S`` ints.
+
+    **Raises:** ``InputError`` for non-finite or empty ``counts``, ``lo > hi``, or a ``total``
+    outside ``[S·lo, S·hi]`` (no integer vector meets it; the adjustment loop would never end).
     """
     x = np.asarray(counts, float)
-    hi = total if hi is None else hi
+    if x.ndim != 1 or x.size == 0:
+        raise InputError(f"`counts` must be a non-empty 1-D array; got shape {x.shape}.")
+    if not np.all(np.isfinite(x)):
+        raise InputError(f"`counts` must be finite; got {x.tolist()}.")
+    total, lo = _as_int("total", total), _as_int("lo", lo)
+    hi = total if hi is None else _as_int("hi", hi)
+    if lo > hi:
+        raise InputError(f"`lo` must not exceed `hi`; got lo={lo}, hi={hi}.")
+    S = len(x)
+    if not S * lo <= total <= S * hi:
+        raise InputError(f"`total` = {total} cannot be met by {S} counts in [{lo}, {hi}]: it must lie in "
+                         f"[{S * lo}, {S * hi}].")
     base = np.clip(np.floor(x), lo, hi).astype(int)
     order = np.argsort(-(x - np.floor(x)))
+    # Each pass over the S counts moves the sum by at least one while the total is feasible (some
+    # count is then below hi, or above lo), so |Σ − total| passes always suffice: the cap is a guard.
+    cap = S * (abs(int(base.sum()) - total) + 1)
     i = 0
-    while base.sum() < total:
-        k = order[i % len(x)]
+    while base.sum() < total and i < cap:
+        k = order[i % S]
         if base[k] < hi:
             base[k] += 1
         i += 1
     i = 0
-    while base.sum() > total:
-        k = order[::-1][i % len(x)]
+    while base.sum() > total and i < cap:
+        k = order[::-1][i % S]
         if base[k] > lo:
             base[k] -= 1
         i += 1
+    if base.sum() != total:  # pragma: no cover - unreachable for a feasible total
+        raise RuntimeError(f"round_counts did not reach the total {total} in {cap} steps.")
     return tuple(int(c) for c in base)
+
+
+def _as_int(name: str, value) -> int:
+    """``value`` as a Python int; InputError naming ``name`` if it is not a finite whole number."""
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"`{name}` must be an integer; got {value!r}.") from None
+    if not np.isfinite(f) or f != int(f):
+        raise InputError(f"`{name}` must be an integer; got {value!r}.")
+    return int(f)
 
 
 def local_search(problem: SegmentProblem, counts: Sequence[int], *, lo: int = 1, hi: int | None = None, max_iter: int = 100) -> tuple[tuple[int, ...], float]:
@@ -490,8 +561,10 @@ def local_search(problem: SegmentProblem, counts: Sequence[int], *, lo: int = 1,
     - ``lo``, ``hi``: the bounds on each ``n_i`` (``hi`` defaults to ``Σn_i``).
     - ``max_iter``: the most moves.
 
-    **Returns:** ``(counts, J)`` at a 1-exchange local optimum.
+    **Returns:** ``(counts, J)`` at a 1-exchange local optimum. Issues
+    :class:`NotConvergedWarning` when a move still helped at the ``max_iter``-th one.
     """
+    max_iter = _check_max_iter(max_iter)
     counts = list(problem.check(counts))
     hi = sum(counts) if hi is None else hi
     best = problem.cost(counts)
@@ -512,6 +585,9 @@ def local_search(problem: SegmentProblem, counts: Sequence[int], *, lo: int = 1,
         if values[k] >= best:
             break
         counts, best = trials[k], float(values[k])
+    else:
+        warnings.warn(f"local_search: still improving after `max_iter` = {max_iter} moves; the scheme "
+                      "returned is the best so far, not a 1-exchange optimum.", NotConvergedWarning, stacklevel=2)
     return tuple(counts), best
 
 
@@ -564,6 +640,8 @@ def per_step_design(
     L = _weight(weight, model_fn(jnp.full(N, span / (N - 1))).state_dim)
     if objective not in ("terminal", "running"):
         raise InputError(f"`objective` must be 'terminal' or 'running'; got {objective!r}.")
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise InputError(f"`steps` must be a positive int; got {steps!r}.")
     theta, hist, J = _per_step_run(model_fn, jnp.zeros(N - 1), L, float(span), float(min_period), objective,
                                    int(steps), float(learning_rate))
     taus = np.asarray(_per_step_taus(theta, span, min_period))

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import os
+import tempfile
+from pathlib import Path
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,9 +72,35 @@ def format_rows(rows: list[PaperRow], title: str) -> str:
     return "\n".join(lines)
 
 
+@contextlib.contextmanager
+def atomic_path(path):
+    """Write a file whole or not at all: yields a temporary path in the target's folder, renamed
+    onto ``path`` when the block ends normally and deleted when it raises (Ctrl-C included).
+
+    The temporary file is hidden (``.name.XXXX.part``) and on the same file system, so the
+    rename is atomic: a reader never sees a partial file under ``path``.
+
+    **Arguments:** ``path``: the final file (its folder must exist). **Returns:** a context
+    manager yielding the temporary ``Path``.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
 def write_figures(out_dir, makers, dpi: int = 120) -> list[str]:
     """Build each figure with its maker and save it as PNG: ``makers`` is ``[(file_name, make), …]``
     with ``make() -> matplotlib Figure``. Creates ``out_dir``; returns the written paths.
+
+    Each file is written to a temporary name and renamed (:func:`atomic_path`), so an
+    interrupted call leaves only complete figures.
 
     **Arguments:**
 
@@ -79,8 +109,6 @@ def write_figures(out_dir, makers, dpi: int = 120) -> list[str]:
 
     **Returns:** the written file paths, a list of str.
     """
-    from pathlib import Path
-
     import matplotlib.pyplot as plt
 
     out = Path(out_dir)
@@ -88,7 +116,10 @@ def write_figures(out_dir, makers, dpi: int = 120) -> list[str]:
     paths = []
     for name, make in makers:
         fig = make()
-        fig.savefig(out / name, dpi=dpi)
-        plt.close(fig)
+        try:
+            with atomic_path(out / name) as tmp:
+                fig.savefig(tmp, dpi=dpi, format=Path(name).suffix.lstrip(".") or "png")
+        finally:
+            plt.close(fig)
         paths.append(str(out / name))
     return paths

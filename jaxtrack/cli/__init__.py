@@ -3,27 +3,34 @@
 ``jaxtrack reproduce STUDY|all`` — reproduce the studies' printed numbers (table or JSON) and figures.
 ``jaxtrack design uniform|ho|gradient`` — sampling schedules for Ho's plant (table + PNG).
 ``jaxtrack demo`` — Monte Carlo of a 2-D constant-velocity tracker (table + PNG).
+
+Arguments are checked before any computation (types, ranges, a writable ``--out``): a bad one
+gives a one-line error on stderr and exit status 2. Ctrl-C stops a command within about a second
+of device work, prints ``jaxtrack: interrupted`` and exits with status 130; files are written to
+a temporary name and renamed, so an interrupted command leaves no partial file.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
+import os
 import sys
 
+from ._args import ArgumentError, OneLineParser, check_out_dir, fail, int_in, seed_limit
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="jaxtrack", description=__doc__.splitlines()[0])
+
+def _parser() -> OneLineParser:
+    parser = OneLineParser(prog="jaxtrack", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     from . import _design, _reproduce
 
     _reproduce.add_parser(sub)
     _design.add_parser(sub)
     demo = sub.add_parser("demo", help="Monte Carlo of a 2-D constant-velocity tracker: RMSE/ANEES table and PNG")
-    demo.add_argument("--runs", type=int, default=10_000, help="Monte Carlo runs (default 10000)")
-    demo.add_argument("--steps", type=int, default=100, help="steps per run (default 100, τ = 1 s)")
-    demo.add_argument("--seed", type=int, default=0, help="PRNG seed (default 0)")
-    demo.add_argument("--chunk-size", type=int, default=2_000, help="runs per compiled batch")
+    demo.add_argument("--runs", type=int_in(2), default=10_000, help="Monte Carlo runs, ≥ 2 (default 10000)")
+    demo.add_argument("--steps", type=int_in(1), default=100, help="steps per run, ≥ 1 (default 100, τ = 1 s)")
+    demo.add_argument("--seed", type=int_in(0), default=0, help="PRNG seed, 0 … 2⁶³−1 (2³²−1 in float32; default 0)")
+    demo.add_argument("--chunk-size", type=int_in(1), default=2_000, help="runs between progress updates, ≥ 1")
     demo.add_argument("--out", default="results/demo", help="output folder for demo.png and demo.json")
     demo.add_argument("--json", action="store_true", help="print the table rows as JSON")
     demo.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -32,13 +39,30 @@ def _parser() -> argparse.ArgumentParser:
         "Share the runs over devices (results identical to one device). Across hosts, start the "
         "same command once per host with --coordinator, --num-processes and --process-id.",
     )
-    scale.add_argument("--devices", type=int, default=None,
+    scale.add_argument("--devices", type=int_in(1), default=None,
                        help="split this CPU into N devices and share the runs over them")
     scale.add_argument("--coordinator", default=None, metavar="HOST:PORT",
                        help="address of process 0, for jax.distributed.initialize")
-    scale.add_argument("--num-processes", type=int, default=None, help="processes in the job (one per host)")
-    scale.add_argument("--process-id", type=int, default=None, help="this process's index, 0 … N−1")
+    scale.add_argument("--num-processes", type=int_in(1), default=None, help="processes in the job (one per host)")
+    scale.add_argument("--process-id", type=int_in(0), default=None, help="this process's index, 0 … N−1")
     return parser
+
+
+def _check_demo(args) -> str | None:
+    """Cross-argument checks of ``demo`` that argparse types cannot make; the message or None."""
+    limit = seed_limit()
+    if args.seed > limit:
+        return f"argument --seed: must be ≤ {limit}, got {args.seed}"
+    multi = (args.coordinator, args.num_processes, args.process_id)
+    if any(v is not None for v in multi):
+        if any(v is None for v in multi):
+            return "--coordinator, --num-processes and --process-id go together"
+        if args.process_id >= args.num_processes:
+            return f"argument --process-id: must be in [0, {args.num_processes - 1}], got {args.process_id}"
+        host, _, port = args.coordinator.rpartition(":")
+        if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+            return f"argument --coordinator: expected HOST:PORT with a port in [1, 65535], got {args.coordinator!r}"
+    return None
 
 
 def _start_devices(args) -> bool:
@@ -46,20 +70,14 @@ def _start_devices(args) -> bool:
     import jax
 
     if args.devices is not None:
-        if args.devices < 1:
-            raise SystemExit("jaxtrack: --devices must be ≥ 1")
         jax.config.update("jax_num_cpu_devices", args.devices)
-    multi = (args.coordinator, args.num_processes, args.process_id)
-    if any(v is not None for v in multi):
-        if any(v is None for v in multi):
-            raise SystemExit("jaxtrack: --coordinator, --num-processes and --process-id go together")
+    if args.coordinator is not None:
         jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.num_processes,
                                    process_id=args.process_id)
     return args.devices is not None or args.coordinator is not None
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+def _run(args) -> int:
     if args.command == "reproduce":
         from . import _reproduce
 
@@ -71,9 +89,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "demo":
         from ._demo import format_table, run_demo
 
-        if args.runs < 2 or args.steps < 1:
-            print("jaxtrack demo: --runs must be ≥ 2 and --steps ≥ 1", file=sys.stderr)
-            return 2
         sharded = _start_devices(args)
         import jax
 
@@ -95,6 +110,48 @@ def main(argv: list[str] | None = None) -> int:
             print(f"figure: {out['figure']}\ntable:  {out['table']}")
         return 0
     return 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line on ``argv`` (default ``sys.argv[1:]``); returns the exit status.
+
+    **Returns:** 0 on success, 1 when ``reproduce`` misses a paper number, 2 for a bad argument
+    (one line on stderr, nothing computed), 130 on Ctrl-C.
+    """
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except ArgumentError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return exc.code if isinstance(exc.code, int) else 0
+    prog = f"jaxtrack {args.command}"
+    if args.command == "demo" and (msg := _check_demo(args)):
+        return fail(prog, msg)
+    if args.command == "design":
+        from ._design import check_args
+
+        if msg := check_args(args):
+            return fail(prog, msg)
+    if msg := check_out_dir(args.out):
+        return fail(prog, msg)
+    from .._validation import InputError
+
+    try:
+        return _run(args)
+    except InputError as exc:  # a value that only the computation could judge (e.g. a Newton step)
+        return fail(prog, str(exc).splitlines()[0])
+    except KeyboardInterrupt:
+        print("jaxtrack: interrupted", file=sys.stderr)
+        if argv is None:
+            # The command line proper: leave at once. A normal interpreter exit waits on (and
+            # has crashed in) JAX's compiler and device threads torn down mid-call; the files
+            # have been cleaned up already (they are written to temporary names and renamed).
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
+        return 130
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..applications._report import atomic_path
 from ..filters import KalmanFilter, run_filter
 from ..models import constant_velocity
 from ..montecarlo import monte_carlo
@@ -92,8 +93,16 @@ def run_demo(num_runs: int = 10_000, num_steps: int = 100, seed: int = 0, out_di
         rmse_unit={"position": "m", "velocity": "m/s"},
     )
     fig.suptitle(f"2-D constant velocity, τ = {SAMPLING_PERIOD} s, q = {ACCEL_PSD} m²/s³, σ = {MEASUREMENT_STD} m")
-    fig.savefig(out / "demo.png", dpi=120)
-    (out / "demo.json").write_text(json.dumps(rows, indent=2))
+    # Temporary names renamed when complete: Ctrl-C while saving leaves no partial file.
+    try:
+        with atomic_path(out / "demo.png") as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    with atomic_path(out / "demo.json") as tmp:
+        tmp.write_text(json.dumps(rows, indent=2))
     return {"rows": rows, "figure": str(out / "demo.png"), "table": str(out / "demo.json")}
 
 

@@ -11,19 +11,37 @@ import json
 
 import numpy as np
 
+from ._args import int_in, positive_float
+
 
 def add_parser(sub) -> None:
     p = sub.add_parser("design", help="design sampling schedules for Ho's plant (uniform Newton, Ho's rule, gradient)")
     p.add_argument("method", choices=["uniform", "ho", "gradient"],
                    help="uniform: Newton for the τ meeting --target; ho: Ho's rule (remove from the least "
                         "sensitive segments); gradient: optax on relaxed counts + rounding + local search, and per-step τ_k")
-    p.add_argument("--g", type=float, default=1.0, help="plant-noise level in g (default 1)")
-    p.add_argument("--samples", type=int, default=40, help="sample budget over the 5 s (default 40)")
-    p.add_argument("--cap-lo", type=int, default=1, help="fewest samples per 1-s segment (default 1)")
-    p.add_argument("--cap-hi", type=int, default=20, help="most samples per 1-s segment (default 20)")
-    p.add_argument("--target", type=float, default=1000.0, help="J* in ft² for the uniform design (default 1000)")
+    p.add_argument("--g", type=positive_float, default=1.0, help="plant-noise level in g, > 0 (default 1)")
+    p.add_argument("--samples", type=int_in(5, MAX_SAMPLES), default=40,
+                   help=f"sample budget over the 5 s, 5 … {MAX_SAMPLES} (default 40)")
+    p.add_argument("--cap-lo", type=int_in(1), default=1, help="fewest samples per 1-s segment (default 1)")
+    p.add_argument("--cap-hi", type=int_in(1, MAX_SAMPLES), default=20, help="most samples per 1-s segment (default 20)")
+    p.add_argument("--target", type=positive_float, default=1000.0, help="J* in ft² for the uniform design, > 0 (default 1000)")
     p.add_argument("--out", default="results/design", help="folder for the figure")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
+
+
+# The gradient design carries cap-hi sample slots per segment and the per-step design one
+# parameter per sample through hundreds of Adam steps: beyond a few thousand samples a run takes
+# hours and gigabytes, so larger budgets are refused up front.
+MAX_SAMPLES = 2000
+
+
+def check_args(args) -> str | None:
+    """The cross-argument check of ``design`` (caps against the budget); the message or None."""
+    S, lo, hi = 5, args.cap_lo, args.cap_hi
+    if not (lo <= hi and S * lo <= args.samples <= S * hi):
+        return (f"need 1 ≤ cap-lo ≤ cap-hi and 5·cap-lo ≤ samples ≤ 5·cap-hi; got samples={args.samples}, "
+                f"caps=[{lo}, {hi}]")
+    return None
 
 
 def _ho_counts(problem, samples: int) -> tuple[int, ...]:
@@ -47,9 +65,8 @@ def run(args) -> int:
     from ..models import ho_plant
 
     S, lo, hi = 5, args.cap_lo, args.cap_hi
-    if not (1 <= lo <= hi and S * lo <= args.samples <= S * hi):
-        print(f"jaxtrack design: need 1 ≤ cap-lo ≤ cap-hi and 5·cap-lo ≤ samples ≤ 5·cap-hi; got "
-              f"samples={args.samples}, caps=[{lo}, {hi}]", file=__import__("sys").stderr)
+    if msg := check_args(args):  # main() checks first; kept for direct callers
+        print(f"jaxtrack design: error: {msg}", file=__import__("sys").stderr)
         return 2
     problem = ho.segment_problem(args.g)
     uniform = tuple(round(c) for c in np.diff(np.round(np.linspace(0, args.samples, S + 1))))

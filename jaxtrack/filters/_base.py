@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from .._validation import InputError, check_shape, is_concrete
+from .._validation import InputError, check_shape, covariance_ok, is_concrete
 from ..models import AbstractStateSpaceModel
 from ._updates import (  # noqa: F401  (re-exported: the update functions' historical home)
     AbstractUpdateForm,
@@ -191,7 +191,8 @@ class FilterResult(eqx.Module):
     - ``num_observed`` ``(T,)``: measurement components used at each step (NIS degrees of freedom).
     - ``log_likelihood`` ``()``: ``Σ_k log N(innovation_k; 0, S_k)`` over observed components.
     - ``final_mean`` ``(n,)``, ``final_cov`` ``(n, n)``: the last filtered state.
-    - ``ok`` ``()`` bool: False if any mean, covariance or the log-likelihood became non-finite.
+    - ``ok`` ``()`` bool: False if any mean, covariance or the log-likelihood became non-finite,
+      or (:func:`run_filter`) the prior is not finite and positive definite.
     """
 
     filtered_mean: Float[Array, "T n"] | None
@@ -237,19 +238,55 @@ def _scan_filter(filter, model, measurements, observed, first_step, save):
 
 
 @eqx.filter_jit
-def _run_filter_jit(filter, model, measurements, observed, first_step, save, throw):
+def _run_filter_jit(filter, model, measurements, observed, first_step, save, throw, check_noise):
     result = _scan_filter(filter, model, measurements, observed, first_step, save)
+    # An indefinite or non-finite prior can run to a finite, meaningless result. The model's
+    # constructor rejects it when the prior is concrete; under tracing (a prior built inside
+    # jit/vmap/grad) only this check sees it. One (n, n) eigvalsh per run, outside the scan.
+    # Semidefinite is accepted: a prior may know some components exactly (e.g. a consider
+    # filter's known parameter), which the constructors cannot build but tree_at can.
+    ok = covariance_ok(model.initial_cov, definite=False) & jnp.all(jnp.isfinite(model.initial_mean))
+    if check_noise:
+        # Traced noise covariances (e.g. built from a traced τ, where a negative τ makes Q
+        # negative definite, or a non-symmetric R) were not seen by the constructor. One batched
+        # eigvalsh over the stored Q and R, outside the scan; skipped for concrete models.
+        ok = ok & _noise_ok(model)
+    result = eqx.tree_at(lambda r: r.ok, result, result.ok & ok)
     if throw:
-        result = eqx.error_if(
-            result,
-            ~result.ok,
-            "jaxtrack: the filter produced a non-finite mean, covariance or log-likelihood. "
-            "Likely causes: (a) a measurement is NaN/inf (pass nan_as_missing=True to skip "
-            "them); (b) R or the prior covariance is not positive definite; (c) units differ "
-            "by many orders of magnitude (e.g. rad vs deg, m vs km); (d) the state diverged. "
-            "Pass throw=False to get the result with ok=False instead.",
-        )
+        result = eqx.error_if(result, ~result.ok, _FILTER_FAILED)
     return result
+
+
+_FILTER_FAILED = (
+    "jaxtrack: the filter produced a non-finite mean, covariance or log-likelihood, or its "
+    "model's prior (`initial_mean`, `initial_cov`) or noise covariances (`process_noise_cov`, "
+    "`measurement_noise_cov`) are not valid covariances. Likely causes: (a) a measurement is "
+    "NaN/inf (pass nan_as_missing=True to skip them); (b) R or the prior covariance is not "
+    "symmetric positive definite, or Q not positive semidefinite (e.g. a negative sampling "
+    "period); (c) units differ by many orders of magnitude (e.g. rad vs deg, m vs km); (d) the "
+    "state diverged. Pass throw=False to get the result with ok=False instead."
+)
+
+
+def _stored_noise(model):
+    """The model's stored ``Q`` and ``R`` arrays (fields of the built-in models), if any."""
+    Q, R = getattr(model, "Q", None), getattr(model, "R", None)
+    return tuple(a if isinstance(a, jax.Array) else None for a in (Q, R))
+
+
+def _noise_ok(model) -> Array:
+    Q, R = _stored_noise(model)
+    ok = jnp.ones((), bool)
+    if Q is not None:
+        ok = ok & covariance_ok(Q, definite=False)
+    if R is not None:
+        ok = ok & covariance_ok(R)
+    return ok
+
+
+def _model_is_traced(model) -> bool:
+    """Whether any array of ``model`` is a tracer (built or passed inside jit/vmap/grad)."""
+    return not all(is_concrete(leaf) for leaf in jax.tree_util.tree_leaves(model))
 
 
 def check_run_arguments(filter, model, first_step, save) -> None:
@@ -291,6 +328,27 @@ def raise_nonfinite_measurements(bad: np.ndarray):
     )
 
 
+def _observed_nonfinite(measurements, mask, shape) -> np.ndarray | None:
+    """Boolean NumPy ``shape`` array, True at observed non-finite measurements; ``None`` if traced.
+
+    Computed in NumPy from the caller's own arrays: inside a ``jit`` trace even a closed-over
+    (concrete) array becomes a tracer as soon as a ``jnp`` operation touches it, so a check on
+    ``jnp.isfinite(z)`` would call ``np.asarray`` on a tracer (``TracerArrayConversionError``;
+    the README's ``jax.jit(jax.grad(loglik))``). When the measurements or the mask are traced
+    the check is skipped and the filter's run-time status (``ok``, ``throw``) reports them.
+    """
+    if not (is_concrete(measurements) and (mask is None or is_concrete(mask))):
+        return None
+    try:
+        z = np.asarray(measurements)
+        observed = np.ones(shape, bool) if mask is None else np.asarray(mask, bool)
+    except jax.errors.TracerArrayConversionError:  # e.g. a list holding tracers
+        return None
+    z = z.reshape(shape)
+    observed = np.broadcast_to(observed[:, None] if observed.ndim == 1 else observed, shape)
+    return ~np.isfinite(z) & observed
+
+
 def prepare_measurements(
     model: AbstractStateSpaceModel,
     measurements: ArrayLike,
@@ -313,8 +371,12 @@ def prepare_measurements(
     ``(T, m)``.
 
     **Raises:** ``InputError`` for wrong shapes, a step count that disagrees with the model's, a mask
-    that is not boolean, or (concrete) non-finite observed measurements.
+    that is not boolean, a model function returning the wrong shape, or (concrete) non-finite
+    observed measurements.
     """
+    # The model's functions first: a wrong output shape would otherwise fail (or broadcast)
+    # deep inside the scan without naming the function.
+    model.check_functions()
     z = jnp.asarray(measurements)
     if not jnp.issubdtype(z.dtype, jnp.floating):
         z = z.astype(model.initial_mean.dtype)
@@ -340,13 +402,13 @@ def prepare_measurements(
         if mask.dtype != bool:
             raise InputError(f"`mask` must be boolean (True = observed); got dtype {mask.dtype}.")
         observed = jnp.broadcast_to(mask[:, None] if mask.ndim == 1 else mask, z.shape)
-    finite = jnp.isfinite(z)
     if nan_as_missing:
+        finite = jnp.isfinite(z)
         observed = observed & finite
         z = jnp.where(finite, z, 0.0)
-    elif is_concrete(z):
-        bad = np.asarray(~finite & observed)
-        if bad.any():
+    else:
+        bad = _observed_nonfinite(measurements, mask, z.shape)
+        if bad is not None and bad.any():
             raise_nonfinite_measurements(bad)
     if not nan_as_missing:
         # Entries the mask marks missing may hold anything (NaN included): never let them in.
@@ -383,8 +445,9 @@ def run_filter(
       ``(T, n)`` besides those (the other histories are ``None``).
     - ``nan_as_missing``: treat NaN measurements as missing. Off by default: a NaN where the mask
       says observed raises ``InputError`` (or, under tracing, makes ``ok`` False).
-    - ``throw``: raise at run time if the result is non-finite. Use ``throw=False`` inside
-      ``vmap`` and read ``result.ok`` per run.
+    - ``throw``: raise at run time if the result is non-finite or the model's prior (and, for a
+      model built under ``jit``/``vmap``/``grad``, its ``Q`` and ``R``) is not a valid
+      covariance. Use ``throw=False`` inside ``vmap`` and read ``result.ok`` per run.
 
     **Returns:** a :class:`FilterResult`.
 
@@ -400,4 +463,4 @@ def run_filter(
     """
     check_run_arguments(filter, model, first_step, save)
     z, observed = prepare_measurements(model, measurements, mask, nan_as_missing)
-    return _run_filter_jit(filter, model, z, observed, first_step, save, throw)
+    return _run_filter_jit(filter, model, z, observed, first_step, save, throw, _model_is_traced(model))

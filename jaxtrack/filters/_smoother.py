@@ -6,7 +6,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..models import AbstractStateSpaceModel
 from ._base import AbstractFilter, FilterResult, FirstStep, run_filter, symmetrize
@@ -19,16 +19,30 @@ class SmootherResult(eqx.Module):
     - ``smoothed_mean`` ``(T, n)``, ``smoothed_cov`` ``(T, n, n)``: ``x̂_{k/T-1}``, ``P_{k/T-1}``.
     - ``smoother_gain`` ``(T-1, n, n)``: ``G_k = P_{k/k} Φ_{k+1}ᵀ P_{k+1/k}⁻¹``.
     - ``filtered``: the forward pass, a :class:`FilterResult`.
+    - ``ok`` ``()`` bool: False if the forward pass failed (``filtered.ok``) or any smoothed mean
+      or covariance is non-finite (typically a singular predicted covariance ``P_{k+1/k}``:
+      ``Q = 0`` with a singular ``F``, whose Cholesky factor is NaN).
     """
 
     smoothed_mean: Float[Array, "T n"]
     smoothed_cov: Float[Array, "T n n"]
     smoother_gain: Float[Array, "Tm1 n n"]
     filtered: FilterResult
+    ok: Bool[Array, ""]
+
+
+_SMOOTHER_FAILED = (
+    "jaxtrack: rts_smoother produced a non-finite smoothed mean or covariance. Likely causes: "
+    "(a) a singular predicted covariance P_{k+1/k}, e.g. `process_noise_cov` Q = 0 (or singular) "
+    "with a singular `transition_matrix` F, so the smoother gain P_{k/k} F^T P_{k+1/k}^-1 does "
+    "not exist; (b) covariances whose units differ by many orders of magnitude, so P_{k+1/k} is "
+    "numerically singular. Add a small plant noise on the affected states, or pass throw=False "
+    "to get the result with ok=False instead."
+)
 
 
 @eqx.filter_jit
-def _rts_backward(model, filtered: FilterResult):
+def _rts_backward(model, filtered: FilterResult, throw: bool):
     def step(carry, inputs):
         next_mean, next_cov = carry
         k, m_f, P_f, m_p_next, P_p_next = inputs
@@ -53,7 +67,16 @@ def _rts_backward(model, filtered: FilterResult):
     _, (means, covs, gains) = jax.lax.scan(step, last, inputs, reverse=True)
     means = jnp.concatenate([means, last[0][None]])
     covs = jnp.concatenate([covs, last[1][None]])
-    return SmootherResult(means, covs, gains, filtered)
+    return _with_status(SmootherResult(means, covs, gains, filtered, filtered.ok), throw)
+
+
+def _with_status(result: SmootherResult, throw: bool) -> SmootherResult:
+    """Set ``ok`` from the smoothed moments; with ``throw`` raise at run time if it is False."""
+    finite = jnp.all(jnp.isfinite(result.smoothed_mean)) & jnp.all(jnp.isfinite(result.smoothed_cov))
+    result = eqx.tree_at(lambda r: r.ok, result, result.filtered.ok & finite)
+    if throw:
+        result = eqx.error_if(result, ~result.ok, _SMOOTHER_FAILED)
+    return result
 
 
 def rts_smoother(
@@ -76,7 +99,14 @@ def rts_smoother(
 
     (Rauch, Tung & Striebel 1965). ``filter`` defaults to :class:`KalmanFilter`; with an
     :class:`ExtendedKalmanFilter` it is the extended RTS smoother (Φ linearised at the filtered
-    estimate). Arguments as :func:`run_filter`.
+    estimate). Arguments as :func:`run_filter`; ``throw=True`` (default) also raises at run time
+    (``equinox``'s runtime error, whose message lists the likely causes) when a smoothed mean or
+    covariance is non-finite; with ``throw=False`` read :attr:`SmootherResult.ok`.
+
+    **Returns:** a :class:`SmootherResult` (``T`` steps, ``n`` states).
+
+    **Raises:** ``InputError`` as :func:`run_filter`; with ``throw=True`` a runtime error if the
+    forward or backward pass produced non-finite values (e.g. a singular predicted covariance).
     """
     filter = KalmanFilter() if filter is None else filter
     filtered = run_filter(
@@ -91,5 +121,5 @@ def rts_smoother(
     )
     if filtered.filtered_mean.shape[0] == 1:
         empty = jnp.zeros((0,) + filtered.filtered_cov.shape[1:], filtered.filtered_cov.dtype)
-        return SmootherResult(filtered.filtered_mean, filtered.filtered_cov, empty, filtered)
-    return _rts_backward(model, filtered)
+        return SmootherResult(filtered.filtered_mean, filtered.filtered_cov, empty, filtered, filtered.ok)
+    return _rts_backward(model, filtered, throw)

@@ -89,10 +89,31 @@ def _as_float_arrays(*arrays):
 
 
 def _check_noise_and_prior(Q, R, m0, P0, angle_components) -> None:
-    """Shape and value checks shared by every model: prior, plant noise, measurement noise."""
+    """Shape and value checks shared by every model: prior, plant noise, measurement noise.
+
+    The state dimension ``n`` is read from the square ``initial_cov`` and ``process_noise_cov``
+    together, so a wrong-length ``initial_mean`` is blamed on ``initial_mean`` (not on the
+    covariance it fails to match), and a wrong-size ``initial_cov`` on ``initial_cov``.
+    """
     check_shape("initial_mean", m0, [(None,)])
-    n = m0.shape[0]
-    check_shape("initial_cov", P0, [(n, n)])
+    check_shape("initial_cov", P0, [(None, None)])
+    check_shape("process_noise_cov", Q, [(None, None), (None, None, None)])
+    if P0.shape[0] != P0.shape[1]:
+        raise InputError(f"`initial_cov` must be square (n, n); got shape {P0.shape}.")
+    if Q.shape[-1] != Q.shape[-2]:
+        raise InputError(f"`process_noise_cov` must be square (n, n) or (T, n, n); got shape {Q.shape}.")
+    n_mean, n_cov, n_q = m0.shape[0], P0.shape[0], Q.shape[-1]
+    if n_mean != n_cov:
+        if n_cov == n_q:
+            raise InputError(
+                f"`initial_mean` must have shape ({n_cov},) to match `initial_cov` {P0.shape} and "
+                f"`process_noise_cov` {Q.shape}; got shape {m0.shape}."
+            )
+        raise InputError(
+            f"`initial_cov` must have shape ({n_mean}, {n_mean}) to match `initial_mean` "
+            f"{m0.shape}; got shape {P0.shape}."
+        )
+    n = n_mean
     check_shape("process_noise_cov", Q, [(n, n), (None, n, n)])
     check_shape("measurement_noise_cov", R, [(None, None), (None, None, None)])
     m = R.shape[-1]
@@ -105,6 +126,29 @@ def _check_noise_and_prior(Q, R, m0, P0, angle_components) -> None:
     check_covariance("initial_cov", P0)
     check_covariance("process_noise_cov", Q, definite=False)
     check_covariance("measurement_noise_cov", R)
+
+
+def _check_function_shape(name, fn, x, k, expected) -> None:
+    """Raise ``InputError`` unless ``fn(x, k)`` (abstractly evaluated) has shape ``expected``."""
+    try:
+        out = jax.eval_shape(fn, x, k)
+    except InputError:
+        raise
+    except Exception as error:  # noqa: BLE001  (any failure inside the user's function)
+        raise InputError(
+            f"`{name}` failed on a state of shape {x.shape} and a step index: "
+            f"{type(error).__name__}: {error}"
+        ) from error
+    shape = getattr(out, "shape", None)
+    if shape != tuple(expected):
+        raise InputError(
+            f"`{name}` must return shape {tuple(expected)} for a state of shape {x.shape}; "
+            f"it returns {shape if shape is not None else type(out).__name__}."
+        )
+
+
+# Structures of models whose functions passed check_functions (see there).
+_CHECKED_MODELS: set = set()
 
 
 class AbstractStateSpaceModel(eqx.Module):
@@ -159,6 +203,44 @@ class AbstractStateSpaceModel(eqx.Module):
             return diff
         idx = jnp.asarray(self.angle_components)
         return diff.at[idx].set(wrap_angle(diff[idx]))
+
+    def check_functions(self) -> None:
+        """Raise ``InputError`` if the model's functions return the wrong shapes (trace-time).
+
+        ``transition(x, k)`` must return ``(n,)`` and ``measurement(x, k)`` ``(m,)`` for a state
+        ``x`` of shape ``(n,)`` and a step index ``k``; otherwise the failure would surface deep
+        inside a ``jnp`` operation (or broadcast silently) without naming the function. Checked
+        with ``jax.eval_shape``, which costs one abstract trace and no arithmetic; called by the
+        entry points (:func:`~jaxtrack.filters.run_filter`,
+        :func:`~jaxtrack.montecarlo.simulate`, …).
+
+        **Returns:** ``None``.
+
+        **Raises:** ``InputError`` naming the function, the expected and the actual shape.
+        """
+        # The abstract trace costs ~10-25 ms; a model of the same structure (types, functions,
+        # static fields, leaf shapes and dtypes) returns the same shapes, so check it once.
+        leaves, treedef = jax.tree_util.tree_flatten(self)
+        key = (treedef, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
+        try:
+            if key in _CHECKED_MODELS:
+                return
+        except TypeError:  # an unhashable static field: check every time
+            key = None
+        n = self.initial_mean.shape[-1]
+        x = jax.ShapeDtypeStruct((n,), self.initial_mean.dtype)
+        k = jax.ShapeDtypeStruct((), jnp.int32)
+        m = self.meas_dim
+        for name, fn, expected in self._function_specs(n, m):
+            _check_function_shape(name, fn, x, k, expected)
+        if key is not None:
+            if len(_CHECKED_MODELS) > 4096:
+                _CHECKED_MODELS.clear()
+            _CHECKED_MODELS.add(key)
+
+    def _function_specs(self, n: int, m: int):
+        """``(name, function, expected output shape)`` for :meth:`check_functions`."""
+        return (("model.transition", self.transition, (n,)), ("model.measurement", self.measurement, (m,)))
 
     @property
     def state_dim(self) -> int:
@@ -257,6 +339,9 @@ class LinearGaussianModel(AbstractStateSpaceModel):
     def meas_dim(self) -> int:
         return self.H.shape[-2]
 
+    def check_functions(self) -> None:
+        """Nothing to trace: the shapes of ``F``, ``H`` and ``b`` were checked at construction."""
+
     def transition_matrix(self, k) -> Float[Array, "n n"]:
         """``F_k``: maps the state at step ``k-1`` to step ``k``."""
         return at_step(self.F, k, 2)
@@ -353,6 +438,14 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
     @property
     def num_steps(self) -> int | None:
         return _num_steps_of(Q=(self.Q, 2), R=(self.R, 2))
+
+    def _function_specs(self, n: int, m: int):
+        specs = [("transition_fn", self.transition_fn, (n,)), ("measurement_fn", self.measurement_fn, (m,))]
+        if self.transition_jacobian_fn is not None:
+            specs.append(("transition_jacobian_fn", self.transition_jacobian_fn, (n, n)))
+        if self.measurement_jacobian_fn is not None:
+            specs.append(("measurement_jacobian_fn", self.measurement_jacobian_fn, (m, n)))
+        return tuple(specs)
 
     def transition(self, x, k):
         return self.transition_fn(x, k)

@@ -17,6 +17,7 @@ contributions are added to the running totals one block at a time in block order
 from __future__ import annotations
 
 import math
+import time
 from typing import Any, Callable, Literal
 
 import equinox as eqx
@@ -192,16 +193,46 @@ def run_blocks(
     runs_per_round = per_round * block
     rounds_per_chunk = max(1, round(chunk_size / runs_per_round))
     num_rounds = math.ceil(num_runs / runs_per_round)
+    # Rounds are dispatched asynchronously. Left alone, the host would queue every round of a
+    # chunk (possibly hours of work) and then block in C++, where Ctrl-C is not seen. So the host
+    # also waits whenever about _WAIT_SECONDS of work is queued (the rate is measured at each
+    # wait), and waits by polling, so a KeyboardInterrupt is raised within one poll interval
+    # even while a round runs. Waiting never changes the results.
+    rounds_per_wait = 1
     with tqdm(total=num_runs, desc=desc, unit="run", disable=not progress) as bar:
         done = 0
+        last_round, last_time = 0, time.perf_counter()
         for r in range(num_rounds):
             totals = step(totals, r * runs_per_round)
-            if (r + 1) % rounds_per_chunk == 0 or r + 1 == num_rounds:
-                totals = jax.block_until_ready(totals)
+            report = (r + 1) % rounds_per_chunk == 0 or r + 1 == num_rounds
+            if report or r + 1 - last_round >= rounds_per_wait:
+                totals = _wait(totals)
+                now = time.perf_counter()
+                if last_round > 0:  # the first round includes the compilation
+                    per_round = (now - last_time) / (r + 1 - last_round)
+                    rounds_per_wait = max(1, int(_WAIT_SECONDS / max(per_round, 1e-9)))
+                last_round, last_time = r + 1, now
+            if report:
                 finished = min((r + 1) * runs_per_round, num_runs)
                 bar.update(finished - done)
                 done = finished
     return local_value(totals)
+
+
+# The most device work (s) queued between two host waits in run_blocks: bounds the delay before
+# Ctrl-C is seen, at the cost of one host round trip per wait (tens of µs).
+_WAIT_SECONDS = 0.25
+
+
+def _wait(tree):
+    """``jax.block_until_ready`` that stays interruptible: poll ``is_ready()`` with short sleeps
+    (a signal interrupts ``time.sleep``, not a blocking wait inside the runtime)."""
+    leaves = [x for x in jax.tree_util.tree_leaves(tree) if hasattr(x, "is_ready")]
+    pause = 1e-4
+    while not all(x.is_ready() for x in leaves):
+        time.sleep(pause)
+        pause = min(2 * pause, 0.002)  # overshoot ≤ 2 ms per wait (< 1% at one wait per 0.25 s)
+    return jax.block_until_ready(tree)
 
 
 # --------------------------------------------------------------------------------------------

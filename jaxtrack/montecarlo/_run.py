@@ -84,6 +84,12 @@ class MonteCarloResult(eqx.Module):
     - ``confidence``: the probability content of the bounds (default 0.95).
     - ``shared_covariance``: True when the filter's covariances were computed once for all runs
       (see :func:`monte_carlo`), False when every run carried its own.
+    - ``precision_warning``: True when the statistics were accumulated in a floating type
+      narrower than float64 and the ANEES or the mean NIS exceed ``PRECISION_MARGIN`` (10) times
+      their upper bounds (a ``RuntimeWarning`` naming float32 is issued too). A mismodelled
+      filter rarely exceeds its bound by more than a few times; float32 round-off of a
+      near-singular covariance (long runs, tiny process noise, large states) gives 10²–10⁵.
+      Float64 results never set it: there such a ratio is a modelling error, not round-off.
     """
 
     mse: Float[Array, "T n"]
@@ -100,6 +106,7 @@ class MonteCarloResult(eqx.Module):
     num_failed: int = eqx.field(static=True)
     confidence: float = eqx.field(static=True)
     shared_covariance: bool = eqx.field(static=True, default=False)
+    precision_warning: bool = eqx.field(static=True, default=False)
 
     def rmse(self, components: tuple[int, ...] | None = None) -> Float[Array, " T"]:
         """Root of the summed mean squared error over ``components`` (all states if None).
@@ -526,6 +533,20 @@ def monte_carlo_sweep(
     ]
 
 
+# How far above their upper bounds the ANEES or mean NIS of a reduced-precision Monte Carlo must be
+# before the result is flagged as a likely float32 failure (see MonteCarloResult.precision_warning).
+PRECISION_MARGIN = 10.0
+
+
+def _precision_suspect(dtype, anees, anees_hi, nis, nis_hi) -> bool:
+    """True when a < float64 result's ANEES or mean NIS is above PRECISION_MARGIN × its bound."""
+    if np.dtype(dtype).itemsize >= 8:
+        return False
+    mean_nis, mean_nis_hi = float(np.mean(nis)), float(np.mean(nis_hi))
+    return bool(float(anees) > PRECISION_MARGIN * float(anees_hi)
+                or (mean_nis_hi > 0 and mean_nis > PRECISION_MARGIN * mean_nis_hi))
+
+
 def _summarize(sums: _Sums, observed, n, confidence, shared=False) -> MonteCarloResult:
     num_ok = int(sums.num_ok)
     num_failed = int(sums.num_failed)
@@ -542,6 +563,18 @@ def _summarize(sums: _Sums, observed, n, confidence, shared=False) -> MonteCarlo
     nees_var = jnp.maximum(sums.nees_sq / num_ok - mean_nees**2, 0.0)
     nis_dof = jnp.sum(observed, axis=-1).astype(sums.nis.dtype)
     nees_b = chi2_mean_bounds(np.full(mean_nees.shape, n), num_ok, confidence)
+    nis_b = chi2_mean_bounds(np.asarray(nis_dof), num_ok, confidence)
+    anees = jnp.mean(mean_nees) / n
+    suspect = _precision_suspect(sums.nees.dtype, anees, nees_b[0][1] / n, sums.nis / num_ok, nis_b[:, 1])
+    if suspect:
+        warnings.warn(
+            f"jaxtrack.monte_carlo: ANEES {float(anees):.3g} (upper bound {float(nees_b[0][1] / n):.3g}) or mean "
+            f"NIS far outside their bounds in {np.dtype(sums.nees.dtype).name}: float32 round-off in the "
+            "covariances is a likely cause; rerun in float64 (unset JAXTRACK_ENABLE_X64) to tell it from "
+            "a mismodelled filter.",
+            RuntimeWarning,
+            stacklevel=3,
+        )
     return MonteCarloResult(
         mse=sums.squared_error / num_ok,
         mean_error=sums.error / num_ok,
@@ -550,11 +583,12 @@ def _summarize(sums: _Sums, observed, n, confidence, shared=False) -> MonteCarlo
         nees_bounds=jnp.asarray(nees_b),
         nis=sums.nis / num_ok,
         nis_dof=nis_dof,
-        nis_bounds=jnp.asarray(chi2_mean_bounds(np.asarray(nis_dof), num_ok, confidence)),
-        anees=jnp.mean(mean_nees) / n,
+        nis_bounds=jnp.asarray(nis_b),
+        anees=anees,
         anees_bounds=jnp.asarray(nees_b[0] / n),
         num_runs=num_ok,
         num_failed=num_failed,
         confidence=confidence,
         shared_covariance=shared,
+        precision_warning=suspect,
     )

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from .._validation import InputError
+from .._validation import InputError, check_covariance, check_finite, covariance_ok, is_concrete
 from ..filters._base import FirstStep
 from ..filters._linalg import matmul
 from ._noise import key_words, step_normals
@@ -182,7 +182,48 @@ def _simulate_jit(model, key, num_steps, first_step):
 
     init = (x0, step_noise(steps_key, 0, num, dtype))
     _, (xs, zs) = jax.lax.scan(step, init, jnp.arange(num_steps))
-    return Trajectory(xs, zs)
+    return _guard_traced_model(model, Trajectory(xs, zs))
+
+
+def _check_model_values(model: AbstractStateSpaceModel) -> None:
+    """Eager checks of the values :func:`simulate` draws from (prior, noise covariances).
+
+    The constructors check these, but a model edited with ``eqx.tree_at`` (or a custom
+    subclass) bypasses them, and a NaN prior would otherwise give NaN states without a word.
+    Only concrete values are checked here; traced ones by :func:`_guard_traced_model`.
+    """
+    check_finite("initial_mean", model.initial_mean)
+    check_covariance("initial_cov", model.initial_cov, definite=False)
+    for name in ("Q", "R"):
+        value = getattr(model, name, None)
+        if value is not None:
+            label = "process_noise_cov" if name == "Q" else "measurement_noise_cov"
+            check_finite(label, value)
+
+
+def _guard_traced_model(model: AbstractStateSpaceModel, out):
+    """Attach ``equinox.error_if`` checks of a traced prior (and noise covariances) to ``out``.
+
+    Under ``jit``/``vmap``/``grad`` the eager checks cannot see the values; a NaN or indefinite
+    prior would give NaN (or meaningless) states silently. One ``(n, n)`` eigvalsh, outside the
+    scan.
+    """
+    if is_concrete(model.initial_mean) and is_concrete(model.initial_cov):
+        checks = []
+    else:
+        checks = [
+            ("initial_mean", jnp.all(jnp.isfinite(model.initial_mean)), "finite"),
+            ("initial_cov", covariance_ok(model.initial_cov, definite=False),
+             "a finite, symmetric, positive semidefinite covariance"),
+        ]
+    for name in ("Q", "R"):
+        value = getattr(model, name, None)
+        if value is not None and not is_concrete(value):
+            label = "process_noise_cov" if name == "Q" else "measurement_noise_cov"
+            checks.append((label, jnp.all(jnp.isfinite(value)), "finite"))
+    for label, ok, what in checks:
+        out = eqx.error_if(out, ~ok, f"jaxtrack.simulate: the model's `{label}` must be {what}.")
+    return out
 
 
 def simulate(
@@ -209,10 +250,19 @@ def simulate(
 
     **Returns:** a :class:`Trajectory` with ``states`` ``(T, n)`` and ``measurements`` ``(T, m)``.
     Use ``jax.vmap`` over keys for a batch.
+
+    **Raises:** ``InputError`` for a bad ``num_steps`` or ``first_step``, a model function
+    returning the wrong shape, or (concrete values) a non-finite prior mean, a prior covariance
+    that is not positive semidefinite, or non-finite noise covariances; under tracing the value
+    checks become ``equinox`` runtime errors naming the same arguments.
     """
+    if not isinstance(model, AbstractStateSpaceModel):
+        raise InputError(f"`model` must be a jaxtrack state-space model; got {type(model).__name__}.")
     num_steps = _resolve_num_steps(model, num_steps)
     if first_step not in ("update", "predict"):
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
+    model.check_functions()
+    _check_model_values(model)
     return _simulate_jit(model, key, num_steps, first_step)
 
 

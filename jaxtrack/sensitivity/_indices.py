@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._validation import InputError
+from .._validation import InputError, covariance_ok, is_concrete
 from ..covariance import covariance_recursion
 from ..filters._base import FirstStep
 from ..models import LinearGaussianModel
@@ -85,12 +85,53 @@ class SegmentSensitivity(NamedTuple):
     segment_end: np.ndarray
 
 
-def _checked_inputs(model_fn: ModelFn, alpha: ArrayLike, method, first_step):
-    """The common entry checks: ``(method, alpha as a float array, model_fn(alpha))``."""
+def _checked_inputs(model_fn: ModelFn, alpha: ArrayLike, method, first_step, num_steps=None):
+    """The common entry checks: ``(method, alpha as a float array, model_fn(alpha))``.
+
+    ``num_steps`` is checked against the model's per-step length here, so a mismatch names
+    ``num_steps`` (the covariance recursion underneath would blame its internal measurements).
+    """
     method = _check_method(method)
     _check_first_step(first_step)
     alpha = jnp.asarray(alpha, dtype=jnp.result_type(float))
-    return method, alpha, _model_of(model_fn, alpha)
+    model = _model_of(model_fn, alpha)
+    if num_steps is not None:
+        if not isinstance(num_steps, (int, np.integer)) or isinstance(num_steps, bool) or num_steps < 1:
+            raise InputError(f"`num_steps` must be a positive int; got {num_steps!r}.")
+        if model.num_steps is not None and model.num_steps != num_steps:
+            raise InputError(
+                f"`num_steps` is {num_steps} but `model_fn(alpha)` has per-step arrays of "
+                f"{model.num_steps} steps; pass num_steps={model.num_steps} or leave it out."
+            )
+    return method, alpha, model
+
+
+def _guard_traced_model(model: LinearGaussianModel, out):
+    """Attach run-time checks of ``model_fn(alpha)``'s covariances to ``out`` when they are traced.
+
+    A model built eagerly is checked by its constructor (e.g. a negative τ raises
+    ``InputError``); under ``jit``/``vmap``/``grad`` the constructor cannot look at the values, and
+    an invalid model (a negative τ makes Ho's Q and R negative) gives a finite, meaningless
+    index. ``equinox.error_if`` raises at run time instead. One batched ``eigvalsh`` over the
+    model's covariances, outside the recursions.
+    """
+    leaves = (model.Q, model.R, model.initial_cov)
+    if all(is_concrete(a) for a in leaves):
+        return out
+    checks = (
+        ("process_noise_cov", covariance_ok(model.Q, definite=False)),
+        ("measurement_noise_cov", covariance_ok(model.R)),
+        ("initial_cov", covariance_ok(model.initial_cov)),
+    )
+    for name, ok in checks:
+        out = eqx.error_if(
+            out,
+            ~ok,
+            f"jaxtrack: `model_fn(alpha)` gives a model whose `{name}` is not a finite, symmetric, "
+            f"positive {'semi' if name == 'process_noise_cov' else ''}definite covariance; "
+            f"check `alpha` (e.g. a sampling period τ must be > 0, a noise level ≥ 0).",
+        )
+    return out
 
 
 def covariance_sensitivity(
@@ -131,8 +172,9 @@ def covariance_sensitivity(
 
     **Returns:** :class:`CovarianceSensitivity` with arrays of shape ``(T, n, n, *a)``.
 
-    **Raises:** :class:`~jaxtrack.InputError` for a bad ``method``, ``model_fn`` or
-    ``first_step``.
+    **Raises:** :class:`~jaxtrack.InputError` for a bad ``method``, ``model_fn``, ``first_step``
+    or ``num_steps`` (not the model's per-step length); under tracing, ``equinox``'s runtime
+    error for a model whose covariances are invalid (e.g. a negative τ).
 
     >>> import jax.numpy as jnp
     >>> from jaxtrack.models import ho_plant
@@ -140,7 +182,7 @@ def covariance_sensitivity(
     >>> round(float(s.d_filtered_cov[-1, 0, 0]), 3)   # ∂P_T(1,1)/∂τ, ft²/s (spec T8)
     2701.741
     """
-    method, alpha, model = _checked_inputs(model_fn, alpha, method, first_step)
+    method, alpha, model = _checked_inputs(model_fn, alpha, method, first_step, num_steps)
 
     if isinstance(method, Autodiff):
 
@@ -150,7 +192,7 @@ def covariance_sensitivity(
 
         jac = jax.jacrev if method.mode == "rev" else jax.jacfwd
         d_pred, d_filt = jac(covs)(alpha)
-        return CovarianceSensitivity(d_pred, d_filt)
+        return _guard_traced_model(model, CovarianceSensitivity(d_pred, d_filt))
 
     history = _history(model, num_steps, _gain_value(gain, alpha), mask, first_step)
 
@@ -166,7 +208,7 @@ def covariance_sensitivity(
     def to_jac(a):
         return jnp.moveaxis(a, 0, -1).reshape(*a.shape[1:], *alpha.shape)
 
-    return CovarianceSensitivity(to_jac(d_pred), to_jac(d_filt))
+    return _guard_traced_model(model, CovarianceSensitivity(to_jac(d_pred), to_jac(d_filt)))
 
 
 def _model_cotangent(model, history, adj: Adjoint, first_step) -> LinearGaussianModel:
@@ -229,12 +271,20 @@ def sensitivity_index(
       ``jax.vjp(model_fn)``: one backward pass for ALL components of α.
     - ``method=Autodiff()``: ``jax.grad`` (default) or ``jax.jacfwd`` (``Autodiff("fwd")``).
 
-    **Arguments:** as :func:`covariance_sensitivity`, plus ``weight`` = ``L_{T/T}`` ``(n, n)``.
+    **Arguments:** as :func:`covariance_sensitivity`, plus ``weight`` = ``L_{T/T}`` ``(n, n)``,
+    finite. ``J = tr(L P)`` depends only on the symmetric part of ``L`` (``P`` is symmetric), so
+    a non-symmetric weight is replaced by ``(L + Lᵀ)/2``: both methods then differentiate the
+    same ``J`` (the analytic adjoint assumes a symmetric ``L``).
 
     **Returns:** ``S_α``, the shape of ``alpha``; units of ``J`` per unit of ``α``. Sample-fixed;
     see :func:`segment_sensitivity` for Ho's time-fixed segment indices.
+
+    **Raises:** :class:`~jaxtrack.InputError` for a bad ``method``, ``model_fn``, ``first_step``,
+    ``num_steps`` (not the model's per-step length) or ``weight`` (wrong shape, non-finite);
+    under tracing, ``equinox``'s runtime error for a non-finite ``weight`` or a model whose
+    covariances are invalid (e.g. a negative τ).
     """
-    method, alpha, model = _checked_inputs(model_fn, alpha, method, first_step)
+    method, alpha, model = _checked_inputs(model_fn, alpha, method, first_step, num_steps)
     L_T = _check_weight(weight, model.state_dim)
 
     if isinstance(method, Autodiff):
@@ -243,7 +293,8 @@ def sensitivity_index(
             h = _history(model_fn(a), num_steps, _gain_value(gain, a), mask, first_step)
             return jnp.trace(L_T @ h.filtered_cov[-1])
 
-        return jax.jacfwd(J)(alpha) if method.mode == "fwd" else jax.grad(J)(alpha)
+        index = jax.jacfwd(J)(alpha) if method.mode == "fwd" else jax.grad(J)(alpha)
+        return _guard_traced_model(model, index)
 
     W_nominal = _gain_value(gain, alpha)
     history = _history(model, num_steps, W_nominal, mask, first_step)
@@ -264,7 +315,7 @@ def sensitivity_index(
             cW = jnp.sum(cW, axis=0)
         (from_gain,) = pull_gain(cW)
         index = index + from_gain
-    return index
+    return _guard_traced_model(model, index)
 
 
 def time_fixed_sensitivity(

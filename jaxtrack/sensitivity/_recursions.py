@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._validation import InputError
+from .._validation import InputError, check_finite, is_concrete
 from ..covariance import CovarianceHistory, covariance_recursion
 from ..filters._base import FirstStep
 from ..models import LinearGaussianModel
@@ -349,10 +349,23 @@ def _analytic_adjoint(model, history, weight) -> Adjoint:
 
 
 def _check_weight(weight, n) -> Array:
+    """``weight`` checked (shape, finite) and replaced by its symmetric part ``(L + Lᵀ)/2``.
+
+    ``J = tr(L P) = tr(sym(L) P)`` for every symmetric ``P``, so only ``sym(L)`` is observable;
+    the analytic recursions (adjoint (43), index (52)) assume a symmetric ``L`` (they use
+    ``L_{k/k} = ∂J/∂P_{k/k}``, which is symmetric), while ``jax.grad`` differentiates ``tr(L P)``
+    as written. Symmetrising makes both methods compute the same derivative of the same ``J``
+    (a non-symmetric weight is a legitimate way to write a cross term, so it is not rejected).
+    A non-finite weight raises ``InputError`` (concrete) or an ``equinox`` runtime error
+    (traced).
+    """
     L = jnp.asarray(weight)
     if L.shape != (n, n):
         raise InputError(f"`weight` (L_T/T) must have shape ({n}, {n}); got {L.shape}.")
-    return L
+    check_finite("weight", L)
+    if not is_concrete(L):
+        L = eqx.error_if(L, ~jnp.all(jnp.isfinite(L)), "`weight` (L_T/T) must be finite.")
+    return 0.5 * (L + L.T)
 
 
 def adjoint(
@@ -382,7 +395,8 @@ def adjoint(
       (symmetrised). With ``gain`` given the gains are held; otherwise they are recomputed.
 
     **Arguments:** ``model`` (:class:`~jaxtrack.models.LinearGaussianModel`), ``weight``
-    ``L_{T/T}`` ``(n, n)`` (e.g. ``diag(1, 0)`` for the position variance; Ho's "rss" error,
+    ``L_{T/T}`` ``(n, n)``, finite; only its symmetric part ``(L + Lᵀ)/2`` is used, since
+    ``J = tr(L P)`` depends on nothing else (e.g. ``diag(1, 0)`` for the position variance; Ho's "rss" error,
     eq. (40), is a sum of variances), ``num_steps``, ``gain`` ``(n, m)``/``(T, n, m)`` (fixed
     suboptimal gains), ``mask``, ``first_step``.
 
