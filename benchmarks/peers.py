@@ -93,48 +93,57 @@ def linear_model(n: int):
     raise ValueError(f"no benchmark model with {n} states")
 
 
-class RangeBearing(AbstractStateSpaceModel):
-    """2-D constant velocity ``[x, y, vx, vy]`` seen by a sensor at the origin: ``z = (r, θ)``."""
+def range_bearing_class(base):
+    """The range-bearing model class on ``base`` (a version's ``AbstractStateSpaceModel``; the
+    revision benchmark builds it on an earlier jaxtrack too)."""
 
-    F: jax.Array
-    Q: jax.Array
-    R: jax.Array
-    initial_mean: jax.Array
-    initial_cov: jax.Array
-    angle_components: tuple[int, ...] = eqx.field(static=True)
+    class RangeBearing(base):
+        """2-D constant velocity ``[x, y, vx, vy]`` seen by a sensor at the origin: ``z = (r, θ)``."""
 
-    @property
-    def num_steps(self):
-        return None
+        F: jax.Array
+        Q: jax.Array
+        R: jax.Array
+        initial_mean: jax.Array
+        initial_cov: jax.Array
+        angle_components: tuple[int, ...] = eqx.field(static=True)
 
-    def transition(self, x, k):
-        return self.F @ x
+        @property
+        def num_steps(self):
+            return None
 
-    def transition_jacobian(self, x, k):
-        return self.F
+        def transition(self, x, k):
+            return self.F @ x
 
-    def measurement(self, x, k):
-        return jnp.stack([jnp.hypot(x[0], x[1]), jnp.arctan2(x[1], x[0])])
+        def transition_jacobian(self, x, k):
+            return self.F
 
-    def measurement_jacobian(self, x, k):
-        r2 = x[0] ** 2 + x[1] ** 2
-        r = jnp.sqrt(r2)
-        zero = jnp.zeros_like(r)
-        return jnp.stack([
-            jnp.stack([x[0] / r, x[1] / r, zero, zero]),
-            jnp.stack([-x[1] / r2, x[0] / r2, zero, zero]),
-        ])
+        def measurement(self, x, k):
+            return jnp.stack([jnp.hypot(x[0], x[1]), jnp.arctan2(x[1], x[0])])
 
-    def process_noise_cov(self, k):
-        return self.Q
+        def measurement_jacobian(self, x, k):
+            r2 = x[0] ** 2 + x[1] ** 2
+            r = jnp.sqrt(r2)
+            zero = jnp.zeros_like(r)
+            return jnp.stack([
+                jnp.stack([x[0] / r, x[1] / r, zero, zero]),
+                jnp.stack([-x[1] / r2, x[0] / r2, zero, zero]),
+            ])
 
-    def measurement_noise_cov(self, k):
-        return self.R
+        def process_noise_cov(self, k):
+            return self.Q
+
+        def measurement_noise_cov(self, k):
+            return self.R
+
+    return RangeBearing
 
 
-def range_bearing_model() -> RangeBearing:
+RangeBearing = range_bearing_class(AbstractStateSpaceModel)
+
+
+def range_bearing_model(cls=RangeBearing):
     cv = linear_model(4)
-    return RangeBearing(
+    return cls(
         F=cv.F, Q=cv.Q, R=jnp.diag(jnp.asarray([5.0, 0.01]) ** 2),
         initial_mean=jnp.asarray([3000.0, 2000.0, -10.0, 5.0]),
         initial_cov=jnp.diag(jnp.asarray([50.0, 50.0, 5.0, 5.0]) ** 2),

@@ -26,13 +26,12 @@ import tempfile
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-import equinox as eqx  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxtrack  # noqa: E402
-from peers import linear_model, race, simulate_batch  # noqa: E402
+from peers import linear_model, race, range_bearing_class, range_bearing_model, simulate_batch  # noqa: E402
 
 
 def load_old(rev: str, folder: str):
@@ -48,45 +47,7 @@ def load_old(rev: str, folder: str):
 
 def range_bearing(lib):
     """peers.py's range-bearing model, built on ``lib``'s model base class."""
-
-    class RangeBearing(lib.models.AbstractStateSpaceModel):
-        F: jax.Array
-        Q: jax.Array
-        R: jax.Array
-        initial_mean: jax.Array
-        initial_cov: jax.Array
-        angle_components: tuple[int, ...] = eqx.field(static=True)
-
-        @property
-        def num_steps(self):
-            return None
-
-        def transition(self, x, k):
-            return self.F @ x
-
-        def transition_jacobian(self, x, k):
-            return self.F
-
-        def measurement(self, x, k):
-            return jnp.stack([jnp.hypot(x[0], x[1]), jnp.arctan2(x[1], x[0])])
-
-        def measurement_jacobian(self, x, k):
-            r2 = x[0] ** 2 + x[1] ** 2
-            r = jnp.sqrt(r2)
-            zero = jnp.zeros_like(r)
-            return jnp.stack([jnp.stack([x[0] / r, x[1] / r, zero, zero]),
-                              jnp.stack([-x[1] / r2, x[0] / r2, zero, zero])])
-
-        def process_noise_cov(self, k):
-            return self.Q
-
-        def measurement_noise_cov(self, k):
-            return self.R
-
-    cv = linear_model(4)
-    return RangeBearing(F=cv.F, Q=cv.Q, R=jnp.diag(jnp.asarray([5.0, 0.01]) ** 2),
-                        initial_mean=jnp.asarray([3000.0, 2000.0, -10.0, 5.0]),
-                        initial_cov=jnp.diag(jnp.asarray([50.0, 50.0, 5.0, 5.0]) ** 2), angle_components=(1,))
+    return range_bearing_model(range_bearing_class(lib.models.AbstractStateSpaceModel))
 
 
 def jobs(lib, zs, obs, zs_rb, runs, steps):

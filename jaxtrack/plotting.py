@@ -4,14 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-import matplotlib
+# The user's matplotlib backend is left alone (a notebook keeps its inline figures); the CLI
+# picks the headless Agg backend for itself (jaxtrack.cli.main).
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.ticker import ScalarFormatter
 
-matplotlib.use("Agg", force=False)  # headless by default; notebooks keep their inline backend
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import ScalarFormatter  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .montecarlo import MonteCarloResult  # noqa: E402
+from .montecarlo import MonteCarloResult
 
 
 def plot_monte_carlo(

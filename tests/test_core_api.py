@@ -135,3 +135,14 @@ def test_monte_carlo_accepts_strategy_objects(cv):
     b = monte_carlo(cv, jax.random.key(0), 64, num_steps=20, progress=False, covariance="per_run")
     np.testing.assert_array_equal(a.nees, b.nees)
     assert not a.shared_covariance
+
+
+def test_plotting_leaves_the_users_backend_alone():
+    """Importing jaxtrack.plotting must not switch matplotlib's backend (notebooks keep inline)."""
+    import subprocess
+    import sys
+
+    code = ("import matplotlib; matplotlib.use('svg'); import jaxtrack.plotting; "
+            "print(matplotlib.get_backend())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip().lower() == "svg"

@@ -136,6 +136,11 @@ def main(argv: list[str] | None = None) -> int:
             return fail(prog, msg)
     if msg := check_out_dir(args.out):
         return fail(prog, msg)
+    import matplotlib
+
+    # The command line writes PNG files and never shows a window: headless backend, chosen here
+    # (the library itself never changes the user's backend).
+    matplotlib.use("Agg")
     from .._validation import InputError
 
     try:

@@ -53,9 +53,6 @@ def _ho_counts(problem, samples: int) -> tuple[int, ...]:
 
 
 def run(args) -> int:
-    import matplotlib
-
-    matplotlib.use("Agg")
     import jax.numpy as jnp
 
     from ..applications import ho_sensitivity as ho
