@@ -57,3 +57,8 @@ from ._relative import (
     pseudolinear_bearing_model as pseudolinear_bearing_model,
     pseudolinear_measurement_row as pseudolinear_measurement_row,
 )
+from ._components import (
+    AbstractMeasurementModel as AbstractMeasurementModel,
+    AbstractTransitionModel as AbstractTransitionModel,
+    TrackingModel as TrackingModel,
+)

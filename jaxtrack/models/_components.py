@@ -1,0 +1,176 @@
+"""Model components: a transition model and a measurement model, composed into a state-space model.
+
+A tracking problem is usually assembled from parts a researcher picks separately: a motion model
+(constant velocity, coordinated turn, …) and a sensor model (range–bearing radar, bearings-only
+sonar, …). The two abstract classes here are those parts, and :class:`TrackingModel` joins one
+of each with a Gaussian prior into an :class:`~jaxtrack.models.AbstractStateSpaceModel` that every
+filter, smoother and Monte Carlo routine of jaxtrack accepts::
+
+    model = TrackingModel(
+        transition=CoordinatedTurn(turn_rate=0.05, sample_period=1.0, noise_intensity=0.1),
+        measurement=RangeBearing(noise_std=(10.0, 0.01), sensor_position=(0.0, 0.0)),
+        initial_mean=m0, initial_cov=P0,
+    )
+
+Components are equinox Modules: every parameter (noise levels, turn rate, sensor pose, biases) is
+an array leaf, so ``jax.grad`` with respect to it works through any filter.
+"""
+
+from __future__ import annotations
+
+import abc
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from .._validation import InputError, check_covariance, check_finite, check_shape
+from ._base import AbstractStateSpaceModel, _as_float_arrays
+
+
+class AbstractTransitionModel(eqx.Module):
+    """A motion model ``x_k = f_k(x_{k-1}) + w_k``, ``w_k ~ N(0, Q_k)``.
+
+    Subclasses implement :meth:`mean`, :meth:`noise_cov` and :attr:`state_dim`; :meth:`jacobian`
+    defaults to ``jax.jacfwd`` of :meth:`mean` and should be overridden with the analytic one.
+    """
+
+    @abc.abstractmethod
+    def mean(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, " n"]:
+        """``f_k(x)``: the mean of ``x_k`` given ``x_{k-1} = x``."""
+
+    @abc.abstractmethod
+    def noise_cov(self, k: Int[Array, ""]) -> Float[Array, "n n"]:
+        """``Q_k``: the plant-noise covariance on the interval ending at step ``k``."""
+
+    @property
+    @abc.abstractmethod
+    def state_dim(self) -> int:
+        """The state dimension ``n``."""
+
+    def jacobian(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, "n n"]:
+        """``∂f_k/∂x`` at ``x`` (``jax.jacfwd`` unless overridden)."""
+        return jax.jacfwd(self.mean)(x, k)
+
+    @property
+    def num_steps(self) -> int | None:
+        """Steps covered by per-step parameters, or ``None`` if time-invariant."""
+        return None
+
+
+class AbstractMeasurementModel(eqx.Module):
+    """A sensor model ``z_k = h_k(x_k) + v_k``, ``v_k ~ N(0, R_k)``.
+
+    Subclasses implement :meth:`mean`, :meth:`noise_cov`, :attr:`meas_dim` and
+    ``angle_components`` (indices of measurement components in radians, whose residuals wrap to
+    (−π, π]); :meth:`jacobian` defaults to ``jax.jacfwd`` of :meth:`mean`.
+    """
+
+    angle_components: eqx.AbstractVar[tuple[int, ...]]
+
+    @abc.abstractmethod
+    def mean(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, " m"]:
+        """``h_k(x)``: the noise-free measurement of state ``x`` at step ``k``."""
+
+    @abc.abstractmethod
+    def noise_cov(self, k: Int[Array, ""]) -> Float[Array, "m m"]:
+        """``R_k``: the measurement-noise covariance at step ``k``."""
+
+    @property
+    @abc.abstractmethod
+    def meas_dim(self) -> int:
+        """The measurement dimension ``m``."""
+
+    def jacobian(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, "m n"]:
+        """``∂h_k/∂x`` at ``x`` (``jax.jacfwd`` unless overridden)."""
+        return jax.jacfwd(self.mean)(x, k)
+
+    @property
+    def num_steps(self) -> int | None:
+        """Steps covered by per-step parameters, or ``None`` if time-invariant."""
+        return None
+
+
+class TrackingModel(AbstractStateSpaceModel):
+    """A state-space model assembled from a transition model, a measurement model and a prior.
+
+    **Arguments:**
+
+    - ``transition``: an :class:`AbstractTransitionModel` (``n`` states).
+    - ``measurement``: an :class:`AbstractMeasurementModel` (``m`` components) of the same state.
+    - ``initial_mean`` ``(n,)``, ``initial_cov`` ``(n, n)``: the Gaussian prior (where it sits is
+      set by the filter's ``first_step``, see :mod:`jaxtrack.models`).
+
+    The model's Jacobians are the components' (analytic where they provide them), and its
+    ``angle_components`` are the measurement model's.
+
+    **Raises:** ``InputError`` naming the argument on a wrong type, shape or a non-finite or
+    non-positive-definite prior.
+    """
+
+    transition_model: AbstractTransitionModel
+    measurement_model: AbstractMeasurementModel
+    initial_mean: Float[Array, " n"]
+    initial_cov: Float[Array, "n n"]
+
+    def __init__(
+        self,
+        transition: AbstractTransitionModel,
+        measurement: AbstractMeasurementModel,
+        initial_mean: ArrayLike,
+        initial_cov: ArrayLike,
+    ):
+        if not isinstance(transition, AbstractTransitionModel):
+            raise InputError(
+                f"`transition` must be a jaxtrack transition model (AbstractTransitionModel); "
+                f"got {type(transition).__name__}."
+            )
+        if not isinstance(measurement, AbstractMeasurementModel):
+            raise InputError(
+                f"`measurement` must be a jaxtrack measurement model (AbstractMeasurementModel); "
+                f"got {type(measurement).__name__}."
+            )
+        m0, P0 = _as_float_arrays(initial_mean, initial_cov)
+        n = transition.state_dim
+        check_shape("initial_mean", m0, [(n,)])
+        check_shape("initial_cov", P0, [(n, n)])
+        check_finite("initial_mean", m0)
+        check_covariance("initial_cov", P0)
+        self.transition_model = transition
+        self.measurement_model = measurement
+        self.initial_mean = m0
+        self.initial_cov = P0
+
+    @property
+    def angle_components(self) -> tuple[int, ...]:
+        return tuple(self.measurement_model.angle_components)
+
+    @property
+    def num_steps(self) -> int | None:
+        steps = {s for s in (self.transition_model.num_steps, self.measurement_model.num_steps) if s is not None}
+        if len(steps) > 1:
+            raise InputError(f"the transition and measurement models disagree on the number of steps: {steps}.")
+        return next(iter(steps), None)
+
+    @property
+    def meas_dim(self) -> int:
+        return self.measurement_model.meas_dim
+
+    def transition(self, x, k):
+        return self.transition_model.mean(x, k)
+
+    def measurement(self, x, k):
+        return self.measurement_model.mean(x, k)
+
+    def transition_jacobian(self, x, k):
+        return self.transition_model.jacobian(x, k)
+
+    def measurement_jacobian(self, x, k):
+        return self.measurement_model.jacobian(x, k)
+
+    def process_noise_cov(self, k):
+        return self.transition_model.noise_cov(k)
+
+    def measurement_noise_cov(self, k):
+        return self.measurement_model.noise_cov(k)
