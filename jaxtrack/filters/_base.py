@@ -121,6 +121,28 @@ class AbstractFilter(eqx.Module):
         """
         return False
 
+    def consistency(self, conditioned: Conditioned, error: Array) -> tuple[Array, Array]:
+        """NEES and NIS of one step: ``eᵀ P⁻¹ e`` for the estimation error ``e`` and ``yᵀ S⁻¹ y``.
+
+        The hook :mod:`jaxtrack.montecarlo` scores every run with, so that a filter carrying its
+        covariances in another form (a square-root filter's Cholesky factors) is scored from that
+        form without squaring it.
+
+        **Arguments:**
+
+        - ``conditioned``: the step's :class:`Conditioned` (filtered covariance, innovation and
+          its covariance, missing components decoupled).
+        - ``error``: ``x − x̂_{k/k}``, ``(n,)``, in the state's units.
+
+        **Returns:** ``(nees, nis)``, two dimensionless scalars.
+        """
+        from ..montecarlo._metrics import normalized_squared_error
+
+        return (
+            normalized_squared_error(error, conditioned.cov),
+            normalized_squared_error(conditioned.innovation, conditioned.innovation_cov),
+        )
+
     def init(self, model: AbstractStateSpaceModel) -> FilterState:
         """The state before the first measurement: the model's prior, log-likelihood 0, step 0."""
         dtype = model.initial_cov.dtype

@@ -39,7 +39,7 @@ from ..filters._base import FirstStep
 from ..filters._batch import CovarianceMode, mean_maps, resolve_covariance, shared_covariances
 from ..filters._linalg import all_rows, cholesky_and_inverse, matmul, sum_rows
 from ..models import AbstractStateSpaceModel
-from ._metrics import chi2_mean_bounds, normalized_squared_error
+from ._metrics import chi2_mean_bounds
 from ._noise import key_words, step_normals
 from ._engine import block_size_for, check_mesh, run_blocks
 from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
@@ -182,8 +182,7 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, k
     def one(filt, x, z, k, obs):
         filt, (_, _, post) = filter.step(filter_model, filt, z, obs, first_step=first_step)
         error = x - post.mean
-        nees = normalized_squared_error(error, post.cov)
-        nis = normalized_squared_error(post.innovation, post.innovation_cov)
+        nees, nis = filter.consistency(post, error)
         return filt, error, nees, nis
 
     def step(carry, inputs):
