@@ -62,3 +62,22 @@ from ._components import (
     AbstractTransitionModel as AbstractTransitionModel,
     TrackingModel as TrackingModel,
 )
+from ._motion import (
+    BlockTransition as BlockTransition,
+    ConstantAcceleration as ConstantAcceleration,
+    ConstantVelocity as ConstantVelocity,
+    CoordinatedTurn as CoordinatedTurn,
+    LinearTransition as LinearTransition,
+    NearlyConstantTurn as NearlyConstantTurn,
+)
+from ._sensors import (
+    Bearing as Bearing,
+    RangeAzimuthElevation as RangeAzimuthElevation,
+    RangeBearing as RangeBearing,
+    sensor_rotation as sensor_rotation,
+)
+from ._converted import (
+    ConvertedMeasurement as ConvertedMeasurement,
+    unbiased_polar_to_cartesian as unbiased_polar_to_cartesian,
+    unbiased_spherical_to_cartesian as unbiased_spherical_to_cartesian,
+)

@@ -37,11 +37,11 @@ class AbstractTransitionModel(eqx.Module):
     """
 
     @abc.abstractmethod
-    def mean(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, " n"]:
+    def mean(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, " n"]:
         """``f_k(x)``: the mean of ``x_k`` given ``x_{k-1} = x``."""
 
     @abc.abstractmethod
-    def noise_cov(self, k: Int[Array, ""]) -> Float[Array, "n n"]:
+    def noise_cov(self, k: Int[ArrayLike, ""]) -> Float[Array, "n n"]:
         """``Q_k``: the plant-noise covariance on the interval ending at step ``k``."""
 
     @property
@@ -49,7 +49,7 @@ class AbstractTransitionModel(eqx.Module):
     def state_dim(self) -> int:
         """The state dimension ``n``."""
 
-    def jacobian(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, "n n"]:
+    def jacobian(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, "n n"]:
         """``∂f_k/∂x`` at ``x`` (``jax.jacfwd`` unless overridden)."""
         return jax.jacfwd(self.mean)(x, k)
 
@@ -70,11 +70,11 @@ class AbstractMeasurementModel(eqx.Module):
     angle_components: eqx.AbstractVar[tuple[int, ...]]
 
     @abc.abstractmethod
-    def mean(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, " m"]:
+    def mean(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, " m"]:
         """``h_k(x)``: the noise-free measurement of state ``x`` at step ``k``."""
 
     @abc.abstractmethod
-    def noise_cov(self, k: Int[Array, ""]) -> Float[Array, "m m"]:
+    def noise_cov(self, k: Int[ArrayLike, ""]) -> Float[Array, "m m"]:
         """``R_k``: the measurement-noise covariance at step ``k``."""
 
     @property
@@ -82,7 +82,7 @@ class AbstractMeasurementModel(eqx.Module):
     def meas_dim(self) -> int:
         """The measurement dimension ``m``."""
 
-    def jacobian(self, x: Float[Array, " n"], k: Int[Array, ""]) -> Float[Array, "m n"]:
+    def jacobian(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, "m n"]:
         """``∂h_k/∂x`` at ``x`` (``jax.jacfwd`` unless overridden)."""
         return jax.jacfwd(self.mean)(x, k)
 
