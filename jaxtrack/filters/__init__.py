@@ -43,3 +43,8 @@ from ._updates import (
     condition_linearized as condition_linearized,
     condition_on_moments as condition_on_moments,
 )
+from ._iterated import IteratedExtendedKalmanFilter as IteratedExtendedKalmanFilter
+from ._square_root import (
+    SquareRootKalmanFilter as SquareRootKalmanFilter,
+    SquareRootUnscentedKalmanFilter as SquareRootUnscentedKalmanFilter,
+)

@@ -11,7 +11,7 @@ exactly the same arithmetic.
 from __future__ import annotations
 
 import abc
-from typing import Literal, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -44,6 +44,11 @@ class FilterState(eqx.Module):
     (before the first step: the prior); ``log_likelihood`` ``()``: the sum of the innovation
     log-densities so far; ``step`` ``()`` int: the index ``k`` of the next measurement;
     ``ok`` ``()`` bool: False once a mean, covariance or the log-likelihood became non-finite.
+
+    A square-root filter (``AbstractFilter.square_root`` True) carries the lower Cholesky factor
+    ``L`` (``P = L Lᵀ``) in ``cov`` instead of ``P``; so do its :class:`StepOutput` and
+    :class:`Conditioned` (``cov``, ``predicted_cov``, and the factor of ``S`` in
+    ``innovation_cov``).
 
     Made by :meth:`AbstractFilter.init`, advanced by :meth:`AbstractFilter.step`; it is a pytree,
     so it can be carried by ``lax.scan``, batched by ``vmap`` and saved between calls.
@@ -88,7 +93,14 @@ class AbstractFilter(eqx.Module):
 
     ``step`` reads the measurement index from ``state.step`` (per-step model arrays are indexed
     by it) and returns the same filtered moments as :func:`run_filter` to the last bit.
+
+    ``square_root`` (class-level flag): True for filters whose states carry Cholesky factors
+    instead of covariances (:class:`~jaxtrack.filters.SquareRootKalmanFilter`,
+    :class:`~jaxtrack.filters.SquareRootUnscentedKalmanFilter`); :func:`run_filter` then squares
+    them once at the end and also returns the factors.
     """
+
+    square_root: ClassVar[bool] = False
 
     @abc.abstractmethod
     def predict(
@@ -215,6 +227,10 @@ class FilterResult(eqx.Module):
     - ``final_mean`` ``(n,)``, ``final_cov`` ``(n, n)``: the last filtered state.
     - ``ok`` ``()`` bool: False if any mean, covariance or the log-likelihood became non-finite,
       or (:func:`run_filter`) the prior is not finite and positive definite.
+    - Square-root filters only (``None`` otherwise): ``filtered_cov_factor`` ``(T, n, n)``,
+      ``predicted_cov_factor`` ``(T, n, n)``, ``innovation_cov_factor`` ``(T, m, m)``,
+      ``final_cov_factor`` ``(n, n)``: the lower Cholesky factors the filter propagated, of which
+      the covariance fields above are the products ``L Lᵀ`` (formed once, after the scan).
     """
 
     filtered_mean: Float[Array, "T n"] | None
@@ -228,6 +244,15 @@ class FilterResult(eqx.Module):
     final_mean: Float[Array, " n"]
     final_cov: Float[Array, "n n"]
     ok: Bool[Array, ""]
+    filtered_cov_factor: Float[Array, "T n n"] | None = None
+    predicted_cov_factor: Float[Array, "T n n"] | None = None
+    innovation_cov_factor: Float[Array, "T m m"] | None = None
+    final_cov_factor: Float[Array, "n n"] | None = None
+
+
+def _outer_factor(L: Array) -> Array:
+    """``L Lᵀ`` over the last two axes: a covariance from its (lower) Cholesky factor."""
+    return jnp.matmul(L, jnp.swapaxes(L, -1, -2))
 
 
 def _scan_filter(filter, model, measurements, observed, first_step, save):
@@ -256,6 +281,16 @@ def _scan_filter(filter, model, measurements, observed, first_step, save):
         hist = (None,) * 7
     elif save == "mean":
         hist = (hist,) + (None,) * 6
+    if filter.square_root:
+        # The scan carried Cholesky factors; the covariances are formed once, here, so that every
+        # filter's FilterResult holds covariances (the smoother and users read them) and the
+        # factors are kept beside them.
+        fm, fL, pm, pL, inn, sL, nobs = hist
+        square = lambda L: None if L is None else _outer_factor(L)  # noqa: E731
+        return FilterResult(
+            fm, square(fL), pm, square(pL), inn, square(sL), nobs, final.log_likelihood,
+            final.mean, _outer_factor(final.cov), final.ok, fL, pL, sL, final.cov,
+        )
     return FilterResult(*hist, final.log_likelihood, final.mean, final.cov, final.ok)
 
 

@@ -20,8 +20,9 @@ class SmootherResult(eqx.Module):
     - ``smoother_gain`` ``(T-1, n, n)``: ``G_k = P_{k/k} Φ_{k+1}ᵀ P_{k+1/k}⁻¹``.
     - ``filtered``: the forward pass, a :class:`FilterResult`.
     - ``ok`` ``()`` bool: False if the forward pass failed (``filtered.ok``) or any smoothed mean
-      or covariance is non-finite (typically a singular predicted covariance ``P_{k+1/k}``:
-      ``Q = 0`` with a singular ``F``, whose Cholesky factor is NaN).
+      or covariance is non-finite. A singular predicted covariance ``P_{k+1/k}`` (``Q = 0`` with
+      a singular ``F``) is not a failure: the gain then uses its pseudo-inverse,
+      ``G_k = P_{k/k} Φ_{k+1}ᵀ P_{k+1/k}⁺``, which gives the exact smoothed moments.
     """
 
     smoothed_mean: Float[Array, "T n"]
@@ -33,12 +34,51 @@ class SmootherResult(eqx.Module):
 
 _SMOOTHER_FAILED = (
     "jaxtrack: rts_smoother produced a non-finite smoothed mean or covariance. Likely causes: "
-    "(a) a singular predicted covariance P_{k+1/k}, e.g. `process_noise_cov` Q = 0 (or singular) "
-    "with a singular `transition_matrix` F, so the smoother gain P_{k/k} F^T P_{k+1/k}^-1 does "
-    "not exist; (b) covariances whose units differ by many orders of magnitude, so P_{k+1/k} is "
-    "numerically singular. Add a small plant noise on the affected states, or pass throw=False "
+    "(a) non-finite filtered moments (see run_filter's error); (b) covariances whose units differ "
+    "by many orders of magnitude, so P_{k+1/k} is numerically indefinite. (A singular P_{k+1/k}, "
+    "e.g. Q = 0 with a singular F, is handled with a pseudo-inverse gain.) Pass throw=False "
     "to get the result with ok=False instead."
 )
+
+
+def _smoother_gain(P_f: Array, F: Array, P_p: Array) -> Array:
+    """``G = P_f Fᵀ P_p⁻¹``, or ``P_f Fᵀ P_p⁺`` (pseudo-inverse) where ``P_p`` is singular.
+
+    The regular case is a Cholesky solve (unchanged, bit for bit). ``P_p = F P_f Fᵀ + Q`` is
+    singular when ``Q`` is and ``F`` is (e.g. ``Q = 0`` and a zero row of ``F``): its Cholesky
+    factor then has a zero or NaN pivot and the inverse does not exist. The pseudo-inverse gain
+    is then the exact one: ``x_{k+1} − x̂_{k+1/k}`` lies in the range of ``P_p`` almost surely,
+    and ``P_f Fᵀ v = 0`` for every ``v`` in its null space (``vᵀ F P_f Fᵀ v = vᵀ P_p v = 0``), so
+    ``E[x_k | x_{k+1}] = x̂_{k/k} + P_f Fᵀ P_p⁺ (x_{k+1} − x̂_{k+1/k})`` is the Gaussian
+    conditional mean (the Gaussian conditional with a generalised inverse; Rao 1973, *Linear Statistical
+    Inference*, ch. 8). ``P_p⁺``
+    comes from ``eigh`` with eigenvalues below ``n·ε·λ_max`` treated as zero.
+
+    **Arguments:** ``P_f`` ``P_{k/k}`` ``(n, n)``; ``F`` ``Φ_{k+1}`` ``(n, n)``; ``P_p``
+    ``P_{k+1/k}`` ``(n, n)``.
+
+    **Returns:** ``G_k``, ``(n, n)`` (dimensionless for a homogeneous state).
+    """
+    n = P_p.shape[-1]
+    cutoff = n * jnp.finfo(P_p.dtype).eps
+    chol = jnp.linalg.cholesky(P_p)
+    G_chol = jsl.cho_solve((chol, True), F @ P_f).T
+    # Regular: finite factor with pivots (squared) above the relative cutoff. A singular P_p
+    # gives a NaN factor, or, when the zero pivot is the last one or rounding leaves it tiny
+    # but positive, a finite factor with a (near-)zero pivot and a huge or NaN gain.
+    pivots = jnp.diagonal(chol) ** 2
+    regular = (
+        jnp.all(jnp.isfinite(G_chol))
+        & jnp.all(pivots > cutoff * jnp.max(jnp.abs(jnp.diagonal(P_p))))
+    )
+    # Double `where`: in the regular case the pseudo-inverse sees the identity, so neither its
+    # value nor its derivative (eigh's is singular at repeated eigenvalues) can reach G.
+    P_safe = jnp.where(regular, jnp.eye(n, dtype=P_p.dtype), P_p)
+    lam, V = jnp.linalg.eigh(P_safe)
+    keep = lam > cutoff * jnp.max(lam)
+    inv_lam = jnp.where(keep, 1.0 / jnp.where(keep, lam, 1.0), 0.0)
+    G_pinv = ((P_f @ F.T) @ V * inv_lam[None, :]) @ V.T
+    return jnp.where(regular, G_chol, G_pinv)
 
 
 @eqx.filter_jit
@@ -48,9 +88,7 @@ def _rts_backward(model, filtered: FilterResult, throw: bool):
         k, m_f, P_f, m_p_next, P_p_next = inputs
         # Φ_{k+1} linearised at the filtered estimate (exact for a linear model).
         F = model.transition_jacobian(m_f, k + 1)
-        # G = P_f Fᵀ P_p⁻¹ via Cholesky of the (symmetric positive definite) prediction.
-        chol = jnp.linalg.cholesky(P_p_next)
-        G = jsl.cho_solve((chol, True), F @ P_f).T
+        G = _smoother_gain(P_f, F, P_p_next)
         mean = m_f + G @ (next_mean - m_p_next)
         cov = symmetrize(P_f + G @ (next_cov - P_p_next) @ G.T)
         return (mean, cov), (mean, cov, G)
@@ -97,7 +135,8 @@ def rts_smoother(
         x̂_{k/N} = x̂_{k/k} + G_k (x̂_{k+1/N} − x̂_{k+1/k}),\quad
         P_{k/N} = P_{k/k} + G_k (P_{k+1/N} − P_{k+1/k}) G_kᵀ
 
-    (Rauch, Tung & Striebel 1965). ``filter`` defaults to :class:`KalmanFilter`; with an
+    (Rauch, Tung & Striebel 1965); where ``P_{k+1/k}`` is singular (``Q = 0`` with a singular ``Φ``)
+    the inverse is replaced by the pseudo-inverse, which is exact there. ``filter`` defaults to :class:`KalmanFilter`; with an
     :class:`ExtendedKalmanFilter` it is the extended RTS smoother (Φ linearised at the filtered
     estimate). Arguments as :func:`run_filter`; ``throw=True`` (default) also raises at run time
     (``equinox``'s runtime error, whose message lists the likely causes) when a smoothed mean or
