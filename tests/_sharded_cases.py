@@ -2,8 +2,9 @@
 test and its worker processes)."""
 
 import jax.numpy as jnp
+import numpy as np
 
-from jaxtrack.filters import ExtendedKalmanFilter
+from jaxtrack.filters import ExtendedKalmanFilter, KalmanFilter
 from jaxtrack.models import constant_velocity
 
 # Not multiples of the block sizes (2048 shared, 512 per run) or of the device counts: the last
@@ -12,7 +13,7 @@ NUM_RUNS = 5000
 SWEEP_RUNS = 1500
 NUM_STEPS = 25
 SWEEP_VALUES = (0.1, 0.5, 2.0)  # acceleration PSD of the truth (m²/s³); the filter assumes 0.5
-FIELDS = ("mse", "mean_error", "nees", "nees_std", "nis")
+FIELDS = ("mse", "mean_error", "nees", "nees_std", "nis", "nis_dof")
 
 
 def cv(accel_psd=0.5):
@@ -21,11 +22,17 @@ def cv(accel_psd=0.5):
 
 
 def cases():
-    """Shared-covariance path (KF, mismatched Q, a gap in the measurements) and per-run path (EKF)."""
+    """Shared-covariance path (KF, mismatched Q, a gap in the measurements), per-run path (EKF),
+    and per-run detections (probability 0.7) with the Kalman filter (per run, with per-run masks
+    too: rows sliced by run index, the padding runs of the last round clamped) and the EKF."""
     mask = jnp.ones(NUM_STEPS, bool).at[10:13].set(False)
+    run_mask = np.random.default_rng(0).random((NUM_RUNS, NUM_STEPS)) < 0.9
     return {
         "kf": {"truth": cv(2.0), "filter_model": cv(0.5), "mask": mask},
         "ekf": {"truth": cv(0.5), "filter": ExtendedKalmanFilter()},
+        "kf_detect": {"truth": cv(0.5), "filter": KalmanFilter(), "covariance": "per_run", "mask": run_mask,
+                      "detection_probability": 0.7},
+        "ekf_detect": {"truth": cv(0.5), "filter": ExtendedKalmanFilter(), "detection_probability": 0.7},
     }
 
 

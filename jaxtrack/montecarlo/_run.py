@@ -16,9 +16,15 @@ Two paths, chosen automatically (``covariance="auto"``):
   depend on the data, so they (and the factors NEES and NIS need) are computed once per call by
   the filter's own step function on zero data; each block then propagates only the truth and
   the estimates, as ``(n, block)`` matrices.
-- **per-run covariance**: any other filter (EKF, UKF) or filter model. Each step ``vmap``s the
+- **per-run covariance**: any other filter (EKF, UKF) or filter model, or runs with their own
+  measurement schedules (a detection probability, per-run masks). Each step ``vmap``s the
   fused per-run step: :func:`~jaxtrack.montecarlo.simulate_step` and
   :meth:`~jaxtrack.filters.AbstractFilter.step`.
+
+Per-run schedules (:func:`_block_observed`): run ``i``'s missed detections are drawn from its own
+key (:func:`~jaxtrack.montecarlo._simulate.draw_detections` on ``fold_in(key, i)``) and its rows
+of a per-run mask are sliced by run index, so a block's schedule, like its draws, depends only on
+the key and the run indices.
 """
 
 from __future__ import annotations
@@ -36,7 +42,13 @@ from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 from .._validation import InputError, check_shape
 from ..filters import AbstractFilter, KalmanFilter, mean_step
 from ..filters._base import FirstStep
-from ..filters._batch import CovarianceMode, mean_maps, resolve_covariance, shared_covariances
+from ..filters._batch import (
+    CovarianceMode,
+    SharedCovariance,
+    mean_maps,
+    resolve_covariance,
+    shared_covariances,
+)
 from ..filters._linalg import all_rows, cholesky_and_inverse, matmul, sum_rows
 from ..models import AbstractStateSpaceModel
 from ._metrics import chi2_mean_bounds
@@ -46,6 +58,8 @@ from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
 from ._simulate import (
     _resolve_num_steps,
     advance,
+    check_detection_probability,
+    draw_detections,
     draw_initial_state,
     noise_factors,
     step_keys,
@@ -62,6 +76,7 @@ class _Sums(NamedTuple):
     nis: Array  # (T,): Σ NIS
     num_ok: Array  # (): runs that stayed finite
     num_failed: Array  # (): runs that produced a non-finite value (excluded from the sums)
+    nis_dof: Array  # (T,): Σ observed measurement components (NIS degrees of freedom) over the runs
 
 
 class MonteCarloResult(eqx.Module):
@@ -74,7 +89,10 @@ class MonteCarloResult(eqx.Module):
     - ``nees`` ``(T,)``: NEES averaged over runs; ``nees_bounds`` ``(T, 2)`` its two-sided bounds.
     - ``nees_std`` ``(T,)``: the empirical standard deviation of NEES over runs.
     - ``nis`` ``(T,)``: NIS averaged over runs; ``nis_dof`` ``(T,)`` its degrees of freedom (the
-      measurement components observed); ``nis_bounds`` ``(T, 2)``.
+      measurement components observed, averaged over the runs: with per-run detections or
+      masks, a run's NIS at step ``k`` is χ²(d_ik) with ``d_ik`` its own observed components);
+      ``nis_bounds`` ``(T, 2)``: the bounds of the run average, from χ²(Σ_i d_ik) / M (a sum of
+      independent χ²(d_i) is χ²(Σ d_i)); ``[0, 0]`` at steps no run observed.
     - ``anees`` ``()``: NEES averaged over runs and steps and divided by ``n`` (1 when
       consistent). ``anees_bounds`` ``(2,)``: the per-step χ²(M·n)/(M·n) bounds. Averaging over
       steps cannot increase the variance of the per-step average (steps are positively
@@ -173,7 +191,8 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, k
 
     Every run carries its own filter state; each step simulates the block's truth, filters (the
     single step function :func:`~jaxtrack.filters.filter_step`, ``vmap``-ed over runs) and adds
-    the step's error, NEES and NIS of the runs where ``use`` to the per-step sums.
+    the step's error, NEES and NIS of the runs where ``use`` to the per-step sums. ``observed``
+    is the schedule shared by the runs, ``(T, m)``, or each run's own, ``(T, block, m)``.
     Returns ``(per-step sums, ok per run)``.
     """
     block = use.shape[0]
@@ -189,10 +208,11 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, k
         filt, x_prev, eps, ok = carry
         k, obs = inputs
         x, z, eps = truth_step(x_prev, eps, k)
-        filt, error, nees, nis = jax.vmap(one, in_axes=(0, 1, 1, None, None))(filt, x, z, k, obs)
+        filt, error, nees, nis = jax.vmap(one, in_axes=(0, 1, 1, None, obs_axis))(filt, x, z, k, obs)
         ok = ok & filt.ok & jnp.isfinite(nees) & jnp.isfinite(nis)
         return (filt, x, eps, ok), _masked_sums(use, error, nees, nis, axis=0)
 
+    obs_axis = None if observed.ndim == 2 else 0
     filt0 = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (block,) + a.shape), filter.init(filter_model))
     ks = jnp.arange(observed.shape[0])
     init = (filt0, x0, eps0, jnp.ones((block,), bool))
@@ -262,11 +282,41 @@ def _shared_setup(filter, filter_model, truth, observed, first_step):
 
 
 class _Common(eqx.Module):
-    """What every block and every swept value share: the filter, the schedule, the prior's place."""
+    """What every block and every swept value share: the filter, the schedule, the prior's place.
+
+    ``detection`` (``P_D`` per step) and ``run_mask`` (every run's own mask) are None unless
+    given; either one gives every run its own schedule (:func:`_block_observed`).
+    """
 
     filter: AbstractFilter
     observed: Array  # (T, m)
     first_step: str = eqx.field(static=True)
+    detection: Array | None = None  # (T,) detection probability
+    run_mask: Array | None = None  # (M, T, m) per-run masks
+
+
+def _block_observed(common: _Common, key, start, block, dtype):
+    """The measurement schedule of runs ``start … start+block−1``: None when every run shares
+    ``common.observed``, else ``(T, block, m)``: the shared mask AND the run's rows of the per-run
+    mask AND its detections (a missed detection removes the whole measurement vector).
+
+    Run ``i``'s detections are :func:`~jaxtrack.montecarlo._simulate.draw_detections` of
+    ``fold_in(key, i)``, exactly those of ``simulate(truth, fold_in(key, i), T,
+    detection_probability=P_D)``. Padding runs (``i ≥ M``) read the last run's mask row (the index
+    is clamped, never out of range); ``valid`` excludes them from the statistics.
+    """
+    if common.detection is None and common.run_mask is None:
+        return None
+    run_index = start + jnp.arange(block)
+    obs = jnp.broadcast_to(common.observed, (block,) + common.observed.shape)  # (block, T, m)
+    if common.run_mask is not None:
+        rows = jnp.minimum(run_index, common.run_mask.shape[0] - 1)
+        obs = obs & jnp.take(common.run_mask, rows, axis=0)
+    if common.detection is not None:
+        keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(run_index)
+        detected = jax.vmap(lambda k: draw_detections(k, common.detection, dtype))(keys)  # (block, T)
+        obs = obs & detected[:, :, None]
+    return jnp.swapaxes(obs, 0, 1)
 
 
 class _Models(eqx.Module):
@@ -290,10 +340,12 @@ def _block_delta(common: _Common, models: _Models, key, start, valid) -> _Sums:
     """
     filter, observed, first_step = common.filter, common.observed, common.first_step
     truth, filter_model, setup = models.truth, models.filter_model, models.setup
+    per_run_obs = _block_observed(common, key, start, valid.shape[0], truth.initial_mean.dtype)
     if setup is None:
         factors = noise_factors(truth, observed.shape[0])
+        obs = observed if per_run_obs is None else per_run_obs
         run = lambda use: _per_run_block(  # noqa: E731
-            filter, filter_model, truth, factors, observed, first_step, key, start, use)
+            filter, filter_model, truth, factors, obs, first_step, key, start, use)
     else:
         factors, cov, maps, nees_factor = setup
         run = lambda use: _shared_block(  # noqa: E731
@@ -302,7 +354,12 @@ def _block_delta(common: _Common, models: _Models, key, start, valid) -> _Sums:
     use = valid & ok
     step_sums = jax.lax.cond(jnp.all(ok | ~valid), lambda: step_sums, lambda: run(use)[0])
     w = use.astype(step_sums.nees.dtype)
-    return _Sums(*step_sums, jnp.sum(w), jnp.sum((valid & ~ok).astype(w.dtype)))
+    # NIS degrees of freedom of the runs that count: integers, summed exactly in any order.
+    if per_run_obs is None:
+        dof = jnp.sum(observed, axis=-1).astype(w.dtype) * jnp.sum(w)
+    else:
+        dof = jnp.sum(per_run_obs, axis=-1).astype(w.dtype) @ w
+    return _Sums(*step_sums, jnp.sum(w), jnp.sum((valid & ~ok).astype(w.dtype)), dof)
 
 
 class _Prepared(NamedTuple):
@@ -312,9 +369,12 @@ class _Prepared(NamedTuple):
     observed: Array
     shared: bool
     block: int
+    detection: Array | None  # (T,) P_D, or None
+    run_mask: Array | None  # (M, T, m), or None
 
 
-def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance):
+def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance,
+             detection_probability=None):
     """Validate a Monte Carlo call; choose the path and the block size."""
     filter = KalmanFilter() if filter is None else filter
     filter_model = truth if filter_model is None else filter_model
@@ -338,23 +398,38 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
     num_steps = _resolve_num_steps(truth, num_steps if num_steps is not None else filter_model.num_steps)
     _resolve_num_steps(filter_model, num_steps)
     m = truth.meas_dim
-    if mask is None:
-        observed = jnp.ones((num_steps, m), bool)
-    else:
+    observed, run_mask = jnp.ones((num_steps, m), bool), None
+    if mask is not None:
         mask = jnp.asarray(mask)
-        check_shape("mask", mask, [(num_steps,), (num_steps, m)])
+        # A 2-D mask that fits both (T, m) and (M, T) (M = T = m) is read as the shared (T, m).
+        check_shape("mask", mask, [(num_steps,), (num_steps, m), (num_runs, num_steps), (num_runs, num_steps, m)])
         if mask.dtype != bool:
             raise InputError(f"`mask` must be boolean (True = observed); got dtype {mask.dtype}.")
-        observed = jnp.broadcast_to(mask[:, None] if mask.ndim == 1 else mask, (num_steps, m))
+        if mask.ndim == 1 or mask.shape == (num_steps, m):
+            observed = jnp.broadcast_to(mask[:, None] if mask.ndim == 1 else mask, (num_steps, m))
+        else:
+            run_mask = jnp.broadcast_to(mask[..., None] if mask.ndim == 2 else mask, (num_runs, num_steps, m))
+    detection = None
+    if detection_probability is not None:
+        detection = jnp.asarray(check_detection_probability(detection_probability, num_steps),
+                                truth.initial_mean.dtype)
 
-    shared = resolve_covariance(covariance, filter, filter_model, True).shared
+    schedule_is_shared = detection is None and run_mask is None
+    if not schedule_is_shared and (covariance == "shared" or isinstance(covariance, SharedCovariance)):
+        raise InputError(
+            "`covariance='shared'` does not apply with "
+            + ("a `detection_probability`" if detection is not None else "a per-run `mask`")
+            + ": every run then has its own measurement schedule, so the filter's covariances and gains "
+            "differ from run to run and cannot be computed once for all; use covariance='auto' or 'per_run'."
+        )
+    shared = resolve_covariance(covariance, filter, filter_model, schedule_is_shared).shared
     block = block_size_for(num_runs, _SHARED_BLOCK if shared else _PER_RUN_BLOCK)
-    return _Prepared(filter, filter_model, num_steps, observed, shared, block)
+    return _Prepared(filter, filter_model, num_steps, observed, shared, block, detection, run_mask)
 
 
 def _zero_sums(num_steps, n, dtype, lead=()):
     z = lambda *shape: jnp.zeros(lead + shape, dtype)  # noqa: E731
-    return _Sums(z(num_steps, n), z(num_steps, n), z(num_steps), z(num_steps), z(num_steps), z(), z())
+    return _Sums(z(num_steps, n), z(num_steps, n), z(num_steps), z(num_steps), z(num_steps), z(), z(), z(num_steps))
 
 
 def monte_carlo(
@@ -366,6 +441,7 @@ def monte_carlo(
     filter: AbstractFilter | None = None,
     filter_model: AbstractStateSpaceModel | None = None,
     mask: ArrayLike | None = None,
+    detection_probability: float | ArrayLike | None = None,
     first_step: FirstStep = "update",
     chunk_size: int = 1000,
     confidence: float = 0.95,
@@ -387,12 +463,24 @@ def monte_carlo(
     :class:`~jaxtrack.models.LinearGaussianModel`, the filter's covariances and gains are the same
     in every run (the mask is shared), so they are computed once and only the truth and the
     estimates are propagated per run. The truth model may be anything. Other filters (EKF, UKF)
-    run with a covariance per run. ``covariance="per_run"`` forces the general path (the
-    statistics agree to rounding); ``"shared"`` raises ``InputError`` where it does not apply.
+    run with a covariance per run, and so does every filter when runs have their own measurement
+    schedules (``detection_probability`` or a per-run ``mask``: the covariances then differ from
+    run to run). ``covariance="per_run"`` forces the general path (the statistics agree to
+    rounding); ``"shared"`` raises ``InputError`` where it does not apply.
 
     Run ``i`` uses the key ``jax.random.fold_in(key, i)`` and the same per-step draws as
     :func:`simulate`, so results do not depend on ``chunk_size`` at all, and run ``i`` can be
     replayed alone with ``simulate(truth, jax.random.fold_in(key, i), T)``.
+
+    **Missed detections.** With ``detection_probability`` ``P_D``, each run draws its own
+    detections, independently per step, from its own key: run ``i``'s are
+    ``simulate(truth, fold_in(key, i), T, detection_probability=P_D).detected`` (filter it with
+    ``run_filter(..., mask=detected)`` to replay it), so they too do not depend on ``chunk_size``
+    or on the devices. A detection is the whole measurement vector: at a missed step every
+    component is missing. The statistics follow each run's schedule: a run's NIS at step ``k``
+    has its own observed components as degrees of freedom, ``nis_dof`` is their average over the
+    runs and ``nis_bounds`` come from the χ² of their sum; NEES is unaffected (the whole state is
+    scored at every step).
 
     **Many devices and hosts.** With ``mesh`` (e.g. :func:`~jaxtrack.montecarlo.run_mesh`), the
     blocks of runs are dealt out along the mesh axis ``mesh_axis``, one per device per round, and
@@ -407,31 +495,39 @@ def monte_carlo(
     - ``num_steps``: ``T`` (defaults to the models' per-step length).
     - ``filter``, ``filter_model``: the estimator and the model it assumes (may differ from
       ``truth``, e.g. a wrong Q); both must have the truth's state and measurement sizes.
-    - ``mask``: shared measurement mask, ``(T,)`` or ``(T, m)``, True = observed.
+    - ``mask``: measurement mask, True = observed: shared by all runs, ``(T,)`` or ``(T, m)``, or
+      one per run, ``(M, T)`` or ``(M, T, m)`` (row ``i`` is run ``i``'s; held in memory whole,
+      ``M·T·m`` bytes). A 2-D mask that fits both ``(T, m)`` and ``(M, T)`` is read as ``(T, m)``.
+    - ``detection_probability``: None (every step detected), or ``P_D`` in ``(0, 1]``, a float or one
+      per step ``(T,)``; a fixed value (not traced, not differentiated). Missed detections are
+      AND-ed with ``mask``. Either this or a per-run mask selects the per-run covariance path.
     - ``first_step``: where the prior sits, as in :func:`~jaxtrack.filters.run_filter`; the
       truth's prior is the distribution of the initial state, the filter model's prior is what
       the filter assumes.
     - ``chunk_size``: runs between progress updates (the compiled block size is fixed, so
       any chunk size reuses one compilation); ``confidence``: content of the χ² bounds;
       ``progress``: show a progress bar.
-    - ``covariance``: ``"auto"`` (default), ``"shared"`` or ``"per_run"`` (see above).
+    - ``covariance``: ``"auto"`` (default), ``"shared"`` or ``"per_run"`` (see above; ``"shared"`` with
+      per-run schedules raises ``InputError``).
     - ``mesh``, ``mesh_axis``: a ``jax.sharding.Mesh`` and the name of its axis to share runs
       along (default ``"runs"``); None runs on the default device.
 
     **Returns:** a :class:`MonteCarloResult`.
     """
-    prep = _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance)
-    filter, filter_model, num_steps, observed, shared, block = prep
+    prep = _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance,
+                    detection_probability)
+    filter, filter_model, num_steps, observed, shared, block, detection, run_mask = prep
     setup = _shared_setup(filter, filter_model, truth, observed, first_step) if shared else None
     if mesh is not None:
         check_mesh(mesh, (mesh_axis,))
     n = truth.state_dim
     sums = run_blocks(
         _block_delta, _zero_sums(num_steps, n, filter_model.initial_cov.dtype),
-        common=_Common(filter, observed, first_step), value=_Models(truth, filter_model, setup), key=key,
+        common=_Common(filter, observed, first_step, detection, run_mask),
+        value=_Models(truth, filter_model, setup), key=key,
         num_runs=num_runs, block=block, mesh=mesh, run_axis=mesh_axis, chunk_size=chunk_size,
         progress=progress, desc="Monte Carlo")
-    return _summarize(sums, observed, n, confidence, shared)
+    return _summarize(sums, n, confidence, shared)
 
 
 def monte_carlo_sweep(
@@ -443,6 +539,7 @@ def monte_carlo_sweep(
     num_steps: int | None = None,
     filter: AbstractFilter | None = None,
     mask: ArrayLike | None = None,
+    detection_probability: float | ArrayLike | None = None,
     first_step: FirstStep = "update",
     chunk_size: int = 1000,
     confidence: float = 0.95,
@@ -467,7 +564,8 @@ def monte_carlo_sweep(
     only, :func:`~jaxtrack.montecarlo.sweep_mesh` builds both). Results do not depend on the mesh.
 
     **Arguments:** ``models``, ``values`` (a sequence, or an array whose leading axis indexes the
-    values); the rest as :func:`monte_carlo` (``filter`` and ``mask`` are common to all values).
+    values); the rest as :func:`monte_carlo` (``filter``, ``mask`` and ``detection_probability`` are
+    common to all values: every value sees the same per-run detections, common random numbers).
 
     Example — RMSE against the sampling period, on 4 devices::
 
@@ -487,7 +585,8 @@ def monte_carlo_sweep(
         truth, filter_model = built if isinstance(built, tuple) else (built, None)
         pairs.append((truth, filter_model))
     preps = [
-        _prepare(t, num_runs, num_steps, filter, fm, mask, first_step, chunk_size, covariance) for t, fm in pairs
+        _prepare(t, num_runs, num_steps, filter, fm, mask, first_step, chunk_size, covariance, detection_probability)
+        for t, fm in pairs
     ]
     pairs = [(t, p.filter_model) for (t, _), p in zip(pairs, preps)]
     prep = preps[0]
@@ -523,11 +622,12 @@ def monte_carlo_sweep(
     n = pairs[0][0].state_dim
     sums = run_blocks(
         _block_delta, _zero_sums(prep.num_steps, n, prep.filter_model.initial_cov.dtype, (padded,)),
-        common=_Common(filter, observed, first_step), value=stacked, key=key, num_runs=num_runs,
+        common=_Common(filter, observed, first_step, prep.detection, prep.run_mask), value=stacked, key=key,
+        num_runs=num_runs,
         block=block, mesh=mesh, run_axis=run_axis, sweep_axis=sweep_axis, chunk_size=chunk_size,
         progress=progress, desc="Monte Carlo sweep")
     return [
-        _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), prep.observed, n, confidence, shared)
+        _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), n, confidence, shared)
         for j in range(num_values)
     ]
 
@@ -546,7 +646,7 @@ def _precision_suspect(dtype, anees, anees_hi, nis, nis_hi) -> bool:
                 or (mean_nis_hi > 0 and mean_nis > PRECISION_MARGIN * mean_nis_hi))
 
 
-def _summarize(sums: _Sums, observed, n, confidence, shared=False) -> MonteCarloResult:
+def _summarize(sums: _Sums, n, confidence, shared=False) -> MonteCarloResult:
     num_ok = int(sums.num_ok)
     num_failed = int(sums.num_failed)
     if num_failed:
@@ -560,9 +660,13 @@ def _summarize(sums: _Sums, observed, n, confidence, shared=False) -> MonteCarlo
         raise FloatingPointError("jaxtrack.monte_carlo: every run produced a non-finite estimate.")
     mean_nees = sums.nees / num_ok
     nees_var = jnp.maximum(sums.nees_sq / num_ok - mean_nees**2, 0.0)
-    nis_dof = jnp.sum(observed, axis=-1).astype(sums.nis.dtype)
+    # Run i's NIS at step k is χ²(d_ik) (its observed components); the runs are independent, so
+    # the sum over runs is χ²(D_k), D_k = Σ_i d_ik, and the run average lies in
+    # [χ²_{D_k}⁻¹(α/2), χ²_{D_k}⁻¹(1 − α/2)] / M: chi2_mean_bounds of D_k for one "run", over M.
+    # With one schedule for all runs D_k = M·d_k and this is chi2_mean_bounds(d_k, M) exactly.
+    nis_dof = sums.nis_dof / num_ok
     nees_b = chi2_mean_bounds(np.full(mean_nees.shape, n), num_ok, confidence)
-    nis_b = chi2_mean_bounds(np.asarray(nis_dof), num_ok, confidence)
+    nis_b = chi2_mean_bounds(np.asarray(sums.nis_dof), 1, confidence) / num_ok
     anees = jnp.mean(mean_nees) / n
     suspect = _precision_suspect(sums.nees.dtype, anees, nees_b[0][1] / n, sums.nis / num_ok, nis_b[:, 1])
     if suspect:

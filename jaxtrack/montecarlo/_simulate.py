@@ -7,7 +7,8 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PRNGKeyArray
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, PRNGKeyArray
 
 from .._validation import InputError, check_covariance, check_finite, covariance_ok, is_concrete
 from ..filters._base import FirstStep
@@ -17,10 +18,17 @@ from ..models import AbstractStateSpaceModel, at_step
 
 
 class Trajectory(NamedTuple):
-    """One simulated run: ``states`` ``(T, n)`` and ``measurements`` ``(T, m)``."""
+    """One simulated run: ``states`` ``(T, n)``, ``measurements`` ``(T, m)`` and ``detected`` ``(T,)``.
+
+    ``detected`` is True where the sensor detected the target at that step (the whole measurement
+    vector is then observed); all True unless :func:`simulate` was given a
+    ``detection_probability``. ``measurements`` holds the drawn values at every step, detected or
+    not: pass ``mask=detected`` to :func:`~jaxtrack.filters.run_filter`.
+    """
 
     states: Float[Array, "T n"]
     measurements: Float[Array, "T m"]
+    detected: Bool[Array, " T"]
 
 
 def psd_sqrt(cov: Array) -> Array:
@@ -66,6 +74,65 @@ def noise_factors(model: AbstractStateSpaceModel, num_steps: int) -> NoiseFactor
         Lq = jax.vmap(lambda k: psd_sqrt(model.process_noise_cov(k)))(ks)
         Lr = jax.vmap(lambda k: psd_sqrt(model.measurement_noise_cov(k)))(ks)
     return NoiseFactors(Lq, Lr, psd_sqrt(model.initial_cov))
+
+
+# The detection draws of a run come from ``fold_in(run_key, _DETECTION_STREAM)``: a stream of its
+# own, so that adding detections leaves the run's prior and per-step draws (``split(run_key)``,
+# see step_keys) unchanged. The constant is arbitrary (ASCII "dete").
+_DETECTION_STREAM = 0x64657465
+
+
+def check_detection_probability(detection_probability, num_steps: int) -> np.ndarray:
+    """Validate a detection probability: a float in ``(0, 1]`` or one per step ``(T,)``.
+
+    It is a fixed design value, not a traced parameter: the detections are Bernoulli draws, not a
+    differentiable function of it.
+
+    **Arguments:**
+
+    - ``detection_probability``: ``P_D``, a scalar or ``(T,)`` array-like of probabilities.
+    - ``num_steps``: ``T``.
+
+    **Returns:** ``P_D`` per step, a float64 NumPy array ``(T,)``.
+
+    **Raises:** ``InputError`` for a traced value, a wrong shape, or a value outside ``(0, 1]``.
+    """
+    try:
+        p = np.asarray(detection_probability, dtype=np.float64)
+    except (TypeError, jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError) as err:
+        raise InputError(
+            "`detection_probability` must be a concrete float or array of floats (a fixed design value, "
+            f"not a traced one); got {type(detection_probability).__name__}."
+        ) from err
+    if p.ndim == 0:
+        p = np.full((num_steps,), float(p))
+    if p.shape != (num_steps,):
+        raise InputError(
+            f"`detection_probability` must be a scalar or have shape ({num_steps},) (one per step); got shape {p.shape}."
+        )
+    if not np.all((p > 0.0) & (p <= 1.0)):
+        raise InputError(f"`detection_probability` must lie in (0, 1] at every step; got values in [{p.min()}, {p.max()}].")
+    return p
+
+
+def draw_detections(run_key: PRNGKeyArray, detection_probability: Array, dtype) -> Array:
+    """The detections of one run: step ``k`` is detected with probability ``P_D[k]``, independently.
+
+    The draws depend only on the run's key (one uniform per step from
+    ``fold_in(run_key, _DETECTION_STREAM)``), so :func:`simulate` and the Monte Carlo harness make
+    the same ones for the same run key, in any batch, block or device.
+
+    **Arguments:**
+
+    - ``run_key``: the run's PRNG key (run ``i`` of a Monte Carlo: ``fold_in(key, i)``).
+    - ``detection_probability``: ``P_D`` per step, ``(T,)``; ``dtype``: the floating type of the uniforms.
+
+    **Returns:** ``detected``, boolean ``(T,)``.
+    """
+    p = jnp.asarray(detection_probability, dtype)
+    u = jax.random.uniform(jax.random.fold_in(run_key, _DETECTION_STREAM), p.shape, dtype)
+    # u ∈ [0, 1): P(u < p) = p, and p = 1 always detects.
+    return u < p
 
 
 def step_keys(key: PRNGKeyArray) -> tuple[PRNGKeyArray, PRNGKeyArray]:
@@ -164,7 +231,7 @@ def advance(model, factors: NoiseFactors, first_step: FirstStep, x_prev, eps, k)
 
 
 @eqx.filter_jit
-def _simulate_jit(model, key, num_steps, first_step):
+def _simulate_jit(model, key, num_steps, first_step, detection_probability):
     factors = noise_factors(model, num_steps)
     prior_key, steps_key = step_keys(key)
     x0 = draw_initial_state(model, factors, prior_key)
@@ -182,7 +249,11 @@ def _simulate_jit(model, key, num_steps, first_step):
 
     init = (x0, step_noise(steps_key, 0, num, dtype))
     _, (xs, zs) = jax.lax.scan(step, init, jnp.arange(num_steps))
-    return _guard_traced_model(model, Trajectory(xs, zs))
+    if detection_probability is None:
+        detected = jnp.ones((num_steps,), bool)
+    else:
+        detected = draw_detections(key, detection_probability, dtype)
+    return _guard_traced_model(model, Trajectory(xs, zs, detected))
 
 
 def _check_model_values(model: AbstractStateSpaceModel) -> None:
@@ -232,6 +303,7 @@ def simulate(
     num_steps: int | None = None,
     *,
     first_step: FirstStep = "update",
+    detection_probability: float | ArrayLike | None = None,
 ) -> Trajectory:
     """Simulate one run of truth and measurements.
 
@@ -245,13 +317,22 @@ def simulate(
     how many steps are simulated after it, and the Monte Carlo harness reproduces it exactly for
     the same run key. Keys must use JAX's default Threefry implementation.
 
+    **Missed detections.** With ``detection_probability`` ``P_D``, step ``k`` is detected with
+    probability ``P_D`` (or ``P_D[k]``), independently of the other steps; a detection is the
+    whole measurement vector (all components are missing together). The draws come from their
+    own stream, ``fold_in(key, ·)``, so the states and measurements are those drawn without it, and
+    run ``i`` of ``monte_carlo(..., detection_probability=P_D)`` has the detections
+    ``simulate(truth, fold_in(key, i), T, detection_probability=P_D).detected``.
+
     **Arguments:** ``model``; ``key``, a PRNG key; ``num_steps`` ``T`` (defaults to the model's
-    per-step length); ``first_step`` as in ``run_filter``.
+    per-step length); ``first_step`` as in ``run_filter``; ``detection_probability``: None (every
+    step detected) or a float in ``(0, 1]``, or one per step ``(T,)`` (a fixed value, not traced).
 
-    **Returns:** a :class:`Trajectory` with ``states`` ``(T, n)`` and ``measurements`` ``(T, m)``.
-    Use ``jax.vmap`` over keys for a batch.
+    **Returns:** a :class:`Trajectory` with ``states`` ``(T, n)``, ``measurements`` ``(T, m)``
+    (drawn at every step) and ``detected`` ``(T,)`` (True = detected; all True without
+    ``detection_probability``). Use ``jax.vmap`` over keys for a batch.
 
-    **Raises:** ``InputError`` for a bad ``num_steps`` or ``first_step``, a model function
+    **Raises:** ``InputError`` for a bad ``num_steps``, ``first_step`` or ``detection_probability``, a model function
     returning the wrong shape, or (concrete values) a non-finite prior mean, a prior covariance
     that is not positive semidefinite, or non-finite noise covariances; under tracing the value
     checks become ``equinox`` runtime errors naming the same arguments.
@@ -263,7 +344,10 @@ def simulate(
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
     model.check_functions()
     _check_model_values(model)
-    return _simulate_jit(model, key, num_steps, first_step)
+    if detection_probability is not None:
+        detection_probability = check_detection_probability(detection_probability, num_steps)
+        detection_probability = jnp.asarray(detection_probability, model.initial_mean.dtype)
+    return _simulate_jit(model, key, num_steps, first_step, detection_probability)
 
 
 def _resolve_num_steps(model, num_steps) -> int:
