@@ -9,6 +9,24 @@ from jaxtyping import Array
 
 from .._validation import InputError
 from ._base import AbstractFilter, condition_on_moments, symmetrize
+from ._linalg import cholesky
+
+
+def _weighted_sum(w, a):
+    """``Σ_i w_i a_i`` over the sigma points (leading axis of ``a``), as adds.
+
+    Under ``vmap`` a product with the weight vector is a batched ``dot_general`` per run (one
+    tiny kernel call each on CPU); the unrolled sum is one element-wise loop over the batch.
+    """
+    out = w[0] * a[0]
+    for i in range(1, a.shape[0]):
+        out = out + w[i] * a[i]
+    return out
+
+
+def _weighted_outer(w, a, b):
+    """``Σ_i w_i a_i b_iᵀ`` over the sigma points (rows of ``a`` ``(p, n)`` and ``b`` ``(p, m)``)."""
+    return _weighted_sum(w, a[:, :, None] * b[:, None, :])
 
 
 class UnscentedKalmanFilter(AbstractFilter):
@@ -50,16 +68,16 @@ class UnscentedKalmanFilter(AbstractFilter):
     def _sigma_points(self, mean, cov):
         n = mean.shape[0]
         wm, wc, scale = self._weights(n, mean.dtype)
-        chol = jnp.linalg.cholesky(cov)
+        chol = cholesky(cov)
         offsets = scale * jnp.concatenate([jnp.zeros((1, n), mean.dtype), chol.T, -chol.T])
         return mean[None, :] + offsets, wm, wc
 
     def predict(self, model, mean, cov, k):
         points, wm, wc = self._sigma_points(mean, cov)
         propagated = jax.vmap(model.transition, in_axes=(0, None))(points, k)
-        pred_mean = wm @ propagated
+        pred_mean = _weighted_sum(wm, propagated)
         dev = propagated - pred_mean[None, :]
-        pred_cov = (dev.T * wc[None, :]) @ dev + model.process_noise_cov(k)
+        pred_cov = _weighted_outer(wc, dev, dev) + model.process_noise_cov(k)
         # Σ w dev devᵀ is symmetric in exact arithmetic; rounding in the weighted product is not.
         return pred_mean, symmetrize(pred_cov)
 
@@ -69,10 +87,10 @@ class UnscentedKalmanFilter(AbstractFilter):
         # Average measurement deviations about the central point through the residual, so that
         # wrapped angles average on the circle.
         z_dev0 = jax.vmap(model.residual, in_axes=(0, None))(z_points, z_points[0])
-        z_pred_offset = wm @ z_dev0
+        z_pred_offset = _weighted_sum(wm, z_dev0)
         z_dev = z_dev0 - z_pred_offset[None, :]
         x_dev = points - mean[None, :]
-        S = (z_dev.T * wc[None, :]) @ z_dev + model.measurement_noise_cov(k)
-        C = (x_dev.T * wc[None, :]) @ z_dev
+        S = _weighted_outer(wc, z_dev, z_dev) + model.measurement_noise_cov(k)
+        C = _weighted_outer(wc, x_dev, z_dev)
         innovation = model.residual(z, z_points[0]) - z_pred_offset
         return condition_on_moments(mean, cov, innovation, S, C, observed)

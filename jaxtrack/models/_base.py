@@ -33,6 +33,7 @@ from collections.abc import Callable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._validation import InputError, check_covariance, check_finite, check_shape
@@ -201,8 +202,11 @@ class AbstractStateSpaceModel(eqx.Module):
         diff = z - z_pred
         if not self.angle_components:
             return diff
-        idx = jnp.asarray(self.angle_components)
-        return diff.at[idx].set(wrap_angle(diff[idx]))
+        # A static 0/1 pattern and `where` rather than a scatter (`.at[idx].set`): under `vmap`
+        # the scatter is a per-element kernel on CPU, the `where` fuses with its neighbours.
+        is_angle = np.zeros(diff.shape[-1], bool)
+        is_angle[list(self.angle_components)] = True
+        return jnp.where(is_angle, wrap_angle(diff), diff)
 
     def check_functions(self) -> None:
         """Raise ``InputError`` if the model's functions return the wrong shapes (trace-time).

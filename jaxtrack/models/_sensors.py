@@ -63,6 +63,11 @@ _AZIMUTH_CONVENTIONS = ("math", "compass")
 # ----------------------------------------------------------------------------------------------
 
 
+def _take(x: Array, indices: tuple[int, ...]) -> Array:
+    """``x[indices]`` for a static index tuple, as static slices."""
+    return jnp.stack([x[i] for i in indices])
+
+
 def _safe_norm(d: Array) -> tuple[Array, Array]:
     """``(‖d‖, 1/‖d‖)`` with ``1/‖d‖ := 0`` and a zero (not NaN) gradient at ``d = 0``."""
     r2 = d @ d
@@ -250,10 +255,12 @@ class _AbstractSensor(AbstractMeasurementModel):
     def _relative(self, x: Array, k) -> tuple[Array, Array | None]:
         """``d = p − s`` and (with range rate) ``u = v − ṡ``, world frame."""
         self._check_state(x)
-        d = x[jnp.asarray(self.position_indices)] - at_step(self.sensor_position, k, 1)
+        # Static indices read one by one: a gather with an index array is a per-element kernel
+        # under `vmap` on CPU, static slices fuse with the arithmetic around them.
+        d = _take(x, self.position_indices) - at_step(self.sensor_position, k, 1)
         u = None
         if self.range_rate:
-            u = x[jnp.asarray(self.velocity_indices)] - at_step(self.sensor_velocity, k, 1)
+            u = _take(x, self.velocity_indices) - at_step(self.sensor_velocity, k, 1)
         return d, u
 
     @abc.abstractmethod
@@ -268,22 +275,25 @@ class _AbstractSensor(AbstractMeasurementModel):
 
     def mean(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, " m"]:
         """``h_k(x)`` + bias, angle components wrapped to (−π, π]."""
-        z = jnp.stack([row[0] for row in self._rows(x, k)]) + at_step(self.bias, k, 1)
-        if self.angle_components:
-            idx = jnp.asarray(self.angle_components)
-            z = z.at[idx].set(wrap_angle(z[idx]))
-        return z
+        rows = self._rows(x, k)
+        z = jnp.stack([row[0] for row in rows]) + at_step(self.bias, k, 1)
+        is_angle = np.isin(np.arange(len(rows)), self.angle_components)
+        return jnp.where(is_angle, wrap_angle(z), z)
 
     def jacobian(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, "m n"]:
         """The analytic ``∂h_k/∂x`` (0 in the rows undefined at degenerate geometry)."""
         rows = self._rows(x, k)
         Hp = jnp.stack([row[1] for row in rows])
-        H = jnp.zeros((len(rows), x.shape[-1]), Hp.dtype).at[:, jnp.asarray(self.position_indices)].set(Hp)
+        # Columns placed by static index (no scatter): position columns, then velocity columns.
+        zero = jnp.zeros((len(rows),), Hp.dtype)
+        columns = [zero] * x.shape[-1]
+        for j, i in enumerate(self.position_indices):
+            columns[i] = Hp[:, j]
         if self.range_rate:
-            zero = jnp.zeros_like(rows[0][1])
-            Hv = jnp.stack([zero if row[2] is None else row[2] for row in rows])
-            H = H.at[:, jnp.asarray(self.velocity_indices)].add(Hv)
-        return H
+            Hv = jnp.stack([jnp.zeros_like(rows[0][1]) if row[2] is None else row[2] for row in rows])
+            for j, i in enumerate(self.velocity_indices):
+                columns[i] = columns[i] + Hv[:, j]
+        return jnp.stack(columns, axis=1)
 
 
 def _init_common(self, d, m, noise_std, noise_cov, sensor_position, sensor_velocity, bias,
