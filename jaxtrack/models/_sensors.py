@@ -63,6 +63,26 @@ _AZIMUTH_CONVENTIONS = ("math", "compass")
 # ----------------------------------------------------------------------------------------------
 
 
+def _rotate(C: Array, d: Array) -> Array:
+    """``C @ d`` for a small matrix, as a sum of scaled columns.
+
+    Under ``vmap`` with ``C`` shared by the batch, ``@`` is a separate matrix-product kernel;
+    the sum is element-wise and fuses with the trigonometry around it.
+    """
+    out = C[:, 0] * d[0]
+    for j in range(1, d.shape[0]):
+        out = out + C[:, j] * d[j]
+    return out
+
+
+def _dot(a: Array, b: Array) -> Array:
+    """``a · b`` of two short vectors as adds (a batched ``@`` is a separate kernel under ``vmap``)."""
+    out = a[0] * b[0]
+    for j in range(1, a.shape[0]):
+        out = out + a[j] * b[j]
+    return out
+
+
 def _take(x: Array, indices: tuple[int, ...]) -> Array:
     """``x[indices]`` for a static index tuple, as static slices."""
     return jnp.stack([x[i] for i in indices])
@@ -70,7 +90,7 @@ def _take(x: Array, indices: tuple[int, ...]) -> Array:
 
 def _safe_norm(d: Array) -> tuple[Array, Array]:
     """``(‖d‖, 1/‖d‖)`` with ``1/‖d‖ := 0`` and a zero (not NaN) gradient at ``d = 0``."""
-    r2 = d @ d
+    r2 = _dot(d, d)
     pos = r2 > 0
     r = jnp.where(pos, jnp.sqrt(jnp.where(pos, r2, 1.0)), 0.0)
     inv_r = jnp.where(pos, 1.0 / jnp.where(pos, r, 1.0), 0.0)
@@ -270,15 +290,21 @@ class _AbstractSensor(AbstractMeasurementModel):
     def _range_rate_row(self, d: Array, u: Array) -> tuple[Array, Array, Array]:
         # ṙ = dᵀu/r;  ∂ṙ/∂p = (u − ṙ d/r)/r;  ∂ṙ/∂v = d/r.
         _, inv_r = _safe_norm(d)
-        rdot = (d @ u) * inv_r
+        rdot = _dot(d, u) * inv_r
         return rdot, (u - rdot * d * inv_r) * inv_r, d * inv_r
 
     def mean(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, " m"]:
         """``h_k(x)`` + bias, angle components wrapped to (−π, π]."""
         rows = self._rows(x, k)
-        z = jnp.stack([row[0] for row in rows]) + at_step(self.bias, k, 1)
         is_angle = np.isin(np.arange(len(rows)), self.angle_components)
-        return jnp.where(is_angle, wrap_angle(z), z)
+        bias = at_step(self.bias, k, 1)
+        # The angles from atan2 lie in (−π, π]; with the bias wrapped first (it is shared by the
+        # runs of a batch, so this costs nothing per run) their sum lies in (−2π, 2π], and one
+        # shift by 2π wraps it: cheaper than a general remainder per sigma point and run.
+        z = jnp.stack([row[0] for row in rows]) + jnp.where(is_angle, wrap_angle(bias), bias)
+        two_pi = 2 * jnp.pi
+        shift = jnp.where(z > jnp.pi, -two_pi, jnp.where(z <= -jnp.pi, two_pi, 0.0))
+        return jnp.where(is_angle, z + shift, z)
 
     def jacobian(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, "m n"]:
         """The analytic ``∂h_k/∂x`` (0 in the rows undefined at degenerate geometry)."""
@@ -394,8 +420,8 @@ class RangeBearing(_AbstractSensor):
         d, u = self._relative(x, k)
         C = _rotation_2d(at_step(self.sensor_yaw, k, 0))
         r, inv_r = _safe_norm(d)
-        az, g_az = _azimuth_row(C @ d, self.azimuth)
-        rows = [(r, d * inv_r, None), (az, g_az @ C, None)]
+        az, g_az = _azimuth_row(_rotate(C, d), self.azimuth)
+        rows = [(r, d * inv_r, None), (az, _rotate(C.T, g_az), None)]
         if self.range_rate:
             rows.append(self._range_rate_row(d, u))
         return rows
@@ -450,8 +476,8 @@ class Bearing(_AbstractSensor):
     def _rows(self, x, k):
         d, u = self._relative(x, k)
         C = _rotation_2d(at_step(self.sensor_yaw, k, 0))
-        az, g_az = _azimuth_row(C @ d, self.azimuth)
-        rows = [(az, g_az @ C, None)]
+        az, g_az = _azimuth_row(_rotate(C, d), self.azimuth)
+        rows = [(az, _rotate(C.T, g_az), None)]
         if self.range_rate:
             rows.append(self._range_rate_row(d, u))
         return rows
@@ -512,11 +538,11 @@ class RangeAzimuthElevation(_AbstractSensor):
     def _rows(self, x, k):
         d, u = self._relative(x, k)
         C = at_step(self.world_to_sensor_rotation, k, 2)
-        ds = C @ d
+        ds = _rotate(C, d)
         r, inv_r = _safe_norm(d)
         az, g_az = _azimuth_row(ds, self.azimuth)
         el, g_el = _elevation_row(ds)
-        rows = [(r, d * inv_r, None), (az, g_az @ C, None), (el, g_el @ C, None)]
+        rows = [(r, d * inv_r, None), (az, _rotate(C.T, g_az), None), (el, _rotate(C.T, g_el), None)]
         if self.range_rate:
             rows.append(self._range_rate_row(d, u))
         return rows
