@@ -48,3 +48,10 @@ from ._square_root import (
     SquareRootKalmanFilter as SquareRootKalmanFilter,
     SquareRootUnscentedKalmanFilter as SquareRootUnscentedKalmanFilter,
 )
+from ._imm import (
+    IMMResult as IMMResult,
+    IMMState as IMMState,
+    IMMStepOutput as IMMStepOutput,
+    InteractingMultipleModel as InteractingMultipleModel,
+    run_imm as run_imm,
+)

@@ -1,0 +1,403 @@
+"""Interacting multiple model (IMM) filter over any Gaussian member filter of jaxtrack.
+
+The IMM of Blom & Bar-Shalom (1988, IEEE TAC 33(8), 780–783), in the notation of Bar-Shalom,
+Li & Kirubarajan (2001), *Estimation with Applications to Tracking and Navigation*, §11.6.6
+("the IMM estimator", eqs. 11.6.6-1 … 11.6.6-21 for the cycle below). One cycle at step ``k``,
+with ``p_ij = P(mode j at k | mode i at k−1)`` and ``μ_i`` the mode probabilities at ``k − 1``:
+
+1. predicted mode probabilities ``c̄_j = Σ_i p_ij μ_i`` and mixing probabilities
+   ``μ_{i|j} = p_ij μ_i / c̄_j`` (eqs. 11.6.6-6, -7);
+2. mixed initial conditions for member ``j`` (eqs. 11.6.6-8, -9):
+   ``x̂⁰_j = Σ_i μ_{i|j} x̂_i``, ``P⁰_j = Σ_i μ_{i|j} [P_i + (x̂_i − x̂⁰_j)(x̂_i − x̂⁰_j)ᵀ]``
+   (the second term is the *spread of the means*);
+3. member ``j``'s own ``predict`` and ``update`` from ``(x̂⁰_j, P⁰_j)`` (eq. 11.6.6-10), giving
+   its innovation likelihood ``Λ_j = N(ν_j; 0, S_j)`` (eq. 11.6.6-11), read from the member's
+   :class:`~jaxtrack.filters.Conditioned` ``log_likelihood``;
+4. mode probabilities ``μ_j = Λ_j c̄_j / Σ_l Λ_l c̄_l`` (eqs. 11.6.6-12, -13), computed in log
+   space with ``logsumexp`` so that very unlikely modes do not underflow to 0/0; the step's
+   log-likelihood is ``log Σ_l Λ_l c̄_l`` (the normaliser);
+5. the combined output (eqs. 11.6.6-14, -15): ``x̂ = Σ_j μ_j x̂_j``,
+   ``P = Σ_j μ_j [P_j + (x̂_j − x̂)(x̂_j − x̂)ᵀ]``; it is output only, never fed back.
+
+Members of different state dimension (e.g. constant velocity ``[x, y, vx, vy]`` and the
+nearly-constant turn ``[x, y, vx, vy, ω]``): the **common state** has the largest dimension
+``N`` and every member's state must be the first ``n_i`` components of it (a prefix; order the
+states so). For mixing and for the combined output a member's mean is *augmented* with
+``augment_mean[n_i:]`` and its covariance with the diagonal block ``diag(augment_var[n_i:])``
+(zero cross-covariance); after mixing, a member takes the first ``n_j`` components of the mixed
+moments (the *projection*). The defaults ``augment_mean = 0``, ``augment_var = 0`` say that a CV
+target is a CT target with turn rate exactly 0 — the usual choice for CV + CT (e.g. Granström,
+Willett & Bar-Shalom 2015 discuss alternatives; pass your own to use them).
+
+Square-root members (:class:`~jaxtrack.filters.SquareRootKalmanFilter`, …) are refused: their
+state is a Cholesky factor, and the mixed covariance (a weighted sum plus the spread of the
+means) has no cheap factor update here; use the covariance form of the same filter.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from .._validation import InputError, check_finite, check_shape, is_concrete
+from ..models import AbstractStateSpaceModel
+from ._base import AbstractFilter, FirstStep, prepare_measurements
+from ._updates import symmetrize
+
+
+def _embed_mean(x: Array, aug: Array) -> Array:
+    """Member mean ``(n_i,)`` → common ``(N,)``: the extra components from ``aug``."""
+    n = x.shape[0]
+    return x if n == aug.shape[0] else jnp.concatenate([x, aug[n:].astype(x.dtype)])
+
+
+def _embed_cov(P: Array, var: Array) -> Array:
+    """Member covariance ``(n_i, n_i)`` → ``(N, N)``: block-diagonal with ``diag(var[n_i:])``."""
+    n, N = P.shape[0], var.shape[0]
+    if n == N:
+        return P
+    out = jnp.zeros((N, N), P.dtype).at[:n, :n].set(P)
+    return out.at[n:, n:].set(jnp.diag(var[n:].astype(P.dtype)))
+
+
+def _moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:
+    """``Σ_i w_i x_i`` and ``Σ_i w_i [P_i + (x_i − x̄)(x_i − x̄)ᵀ]`` (BLK 2001 eqs. 11.6.6-8, -9).
+
+    ``weights`` ``(M,)``, ``means`` ``(M, N)``, ``covs`` ``(M, N, N)``.
+    """
+    mean = jnp.sum(weights[:, None] * means, axis=0)
+    d = means - mean[None, :]
+    spread = d[:, :, None] * d[:, None, :]
+    cov = jnp.sum(weights[:, None, None] * (covs + spread), axis=0)
+    return mean, symmetrize(cov)
+
+
+class IMMState(eqx.Module):
+    """What the IMM carries from one measurement to the next (one trajectory).
+
+    **Fields:** ``means``, ``covs``: tuples of the members' filtered ``x̂_j`` ``(n_j,)`` and
+    ``P_j`` ``(n_j, n_j)`` (before the first step: their priors); ``mode_probs`` ``(M,)``: ``μ_j``;
+    ``log_likelihood`` ``()``: the sum of the steps' ``log Σ_j Λ_j c̄_j``; ``step`` ``()`` int;
+    ``ok`` ``()`` bool: False once something became non-finite.
+    """
+
+    means: tuple
+    covs: tuple
+    mode_probs: Float[Array, " M"]
+    log_likelihood: Float[Array, ""]
+    step: Int[Array, ""]
+    ok: Bool[Array, ""]
+
+
+class IMMStepOutput(eqx.Module):
+    """One IMM step's outputs besides the new state.
+
+    ``mean`` ``(N,)``, ``cov`` ``(N, N)``: the combined estimate (eqs. 11.6.6-14, -15);
+    ``mode_probs`` ``(M,)``; ``member_log_likelihoods`` ``(M,)``: ``log Λ_j``; ``log_likelihood``
+    ``()``: this step's ``log Σ_j Λ_j c̄_j``.
+    """
+
+    mean: Float[Array, " N"]
+    cov: Float[Array, "N N"]
+    mode_probs: Float[Array, " M"]
+    member_log_likelihoods: Float[Array, " M"]
+    log_likelihood: Float[Array, ""]
+
+
+class InteractingMultipleModel(eqx.Module):
+    """Interacting multiple model estimator (Blom & Bar-Shalom 1988; BLK 2001 §11.6.6).
+
+    **Arguments:**
+
+    - ``members``: a sequence of ``(filter, model)`` pairs, ``M ≥ 1``: any non-square-root
+      jaxtrack filter (:class:`~jaxtrack.filters.KalmanFilter`,
+      :class:`~jaxtrack.filters.ExtendedKalmanFilter`,
+      :class:`~jaxtrack.filters.UnscentedKalmanFilter`,
+      :class:`~jaxtrack.filters.IteratedExtendedKalmanFilter`, …) with its
+      :class:`~jaxtrack.models.AbstractStateSpaceModel`. All models share the measurement
+      dimension; each model's prior is its member's state before the first step.
+    - ``transition_probs``: the Markov mode-transition matrix ``p_ij`` ``(M, M)``, row ``i`` the
+      distribution of the next mode given mode ``i`` (rows sum to 1, entries ≥ 0). An array
+      leaf: differentiate through it, or build it with :meth:`from_logits` so that rows stay
+      stochastic under gradient steps.
+    - ``initial_probs``: the mode probabilities ``(M,)`` where the priors sit (``first_step``:
+      at the first measurement, or one transition before it). Default uniform.
+    - ``augment_mean``, ``augment_var``: ``(N,)``, only for members of different dimension: the
+      mean and variance given to the components a smaller member lacks (module docstring;
+      default 0 and 0).
+
+    **Raises:** ``InputError`` naming the argument: not a (filter, model) pair, a square-root
+    filter, different measurement dimensions, a state that is not the prefix-compatible size,
+    ``transition_probs`` not ``(M, M)``, negative, or (when concrete) rows not summing to 1,
+    ``initial_probs`` not ``(M,)`` / negative / not summing to 1.
+    """
+
+    filters: tuple
+    models: tuple
+    transition_probs: Float[Array, "M M"]
+    initial_probs: Float[Array, " M"]
+    augment_mean: Float[Array, " N"]
+    augment_var: Float[Array, " N"]
+
+    def __init__(
+        self,
+        members: Sequence,
+        transition_probs: ArrayLike,
+        initial_probs: ArrayLike | None = None,
+        *,
+        augment_mean: ArrayLike | None = None,
+        augment_var: ArrayLike | None = None,
+    ):
+        members = tuple(members)
+        if len(members) == 0:
+            raise InputError("`members` must hold at least one (filter, model) pair; got none.")
+        filters, models = [], []
+        for i, pair in enumerate(members):
+            if not (isinstance(pair, (tuple, list)) and len(pair) == 2):
+                raise InputError(f"`members[{i}]` must be a (filter, model) pair; got {pair!r}.")
+            f, m = pair
+            if not isinstance(f, AbstractFilter):
+                raise InputError(f"`members[{i}]`'s filter must be a jaxtrack filter; got {type(f).__name__}.")
+            if f.square_root:
+                raise InputError(
+                    f"`members[{i}]`: square-root filter {type(f).__name__} is not supported as an "
+                    f"IMM member (its state is a Cholesky factor; mixing needs the covariance). Use "
+                    f"the covariance form of the filter."
+                )
+            if not isinstance(m, AbstractStateSpaceModel):
+                raise InputError(
+                    f"`members[{i}]`'s model must be a jaxtrack state-space model; got {type(m).__name__}."
+                )
+            f.check_model(m)
+            filters.append(f)
+            models.append(m)
+        meas = {m.meas_dim for m in models}
+        if len(meas) > 1:
+            raise InputError(f"`members`' models must share the measurement dimension; got {sorted(meas)}.")
+        M = len(models)
+        N = max(m.state_dim for m in models)
+        dtype = jnp.result_type(*(m.initial_cov.dtype for m in models))
+        P = jnp.asarray(transition_probs)
+        P = P.astype(jnp.result_type(P, dtype))
+        check_shape("transition_probs", P, [(M, M)])
+        if is_concrete(P):
+            Pn = np.asarray(P)
+            if not np.all(np.isfinite(Pn)) or np.any(Pn < 0):
+                raise InputError("`transition_probs` must be finite and non-negative.")
+            rows = Pn.sum(axis=1)
+            if not np.allclose(rows, 1.0, rtol=0, atol=1e-8):
+                raise InputError(
+                    f"`transition_probs` rows must sum to 1 (row i: the next mode's distribution "
+                    f"given mode i); got row sums {rows}."
+                )
+        mu = jnp.full((M,), 1.0 / M, P.dtype) if initial_probs is None else jnp.asarray(initial_probs)
+        mu = mu.astype(jnp.result_type(mu, P.dtype))
+        check_shape("initial_probs", mu, [(M,)])
+        if is_concrete(mu):
+            mun = np.asarray(mu)
+            if not np.all(np.isfinite(mun)) or np.any(mun < 0) or not np.isclose(mun.sum(), 1.0, rtol=0, atol=1e-8):
+                raise InputError(f"`initial_probs` must be non-negative and sum to 1; got {mun}.")
+        am = jnp.zeros((N,), P.dtype) if augment_mean is None else jnp.asarray(augment_mean).astype(P.dtype)
+        av = jnp.zeros((N,), P.dtype) if augment_var is None else jnp.asarray(augment_var).astype(P.dtype)
+        check_shape("augment_mean", am, [(N,)])
+        check_shape("augment_var", av, [(N,)])
+        check_finite("augment_mean", am)
+        if is_concrete(av) and np.any(np.asarray(av) < 0):
+            raise InputError("`augment_var` must be non-negative.")
+        self.filters = tuple(filters)
+        self.models = tuple(models)
+        self.transition_probs = P
+        self.initial_probs = mu
+        self.augment_mean = am
+        self.augment_var = av
+
+    @classmethod
+    def from_logits(
+        cls,
+        members: Sequence,
+        logits: ArrayLike,
+        initial_probs: ArrayLike | None = None,
+        **kwargs,
+    ) -> "InteractingMultipleModel":
+        """Build the IMM with ``p_ij = softmax_j(logits_ij)``: rows stochastic for any logits.
+
+        **Arguments:** ``members``, ``initial_probs``, ``**kwargs`` as for the constructor;
+        ``logits``: ``(M, M)`` unconstrained reals (a gradient step on them keeps every row a
+        distribution). **Returns:** an :class:`InteractingMultipleModel`.
+        """
+        logits = jnp.asarray(logits)
+        check_shape("logits", logits, [(None, None)])
+        return cls(members, jax.nn.softmax(logits, axis=-1), initial_probs, **kwargs)
+
+    @property
+    def num_modes(self) -> int:
+        """``M``, the number of members."""
+        return len(self.models)
+
+    @property
+    def state_dim(self) -> int:
+        """``N``, the common (largest) state dimension."""
+        return self.augment_mean.shape[0]
+
+    def init(self) -> IMMState:
+        """The state before the first measurement: the members' priors and ``initial_probs``."""
+        dtype = self.transition_probs.dtype
+        return IMMState(
+            tuple(m.initial_mean for m in self.models),
+            tuple(m.initial_cov for m in self.models),
+            self.initial_probs,
+            jnp.zeros((), dtype),
+            jnp.zeros((), jnp.int32),
+            jnp.ones((), bool),
+        )
+
+    def _common(self, means, covs):
+        X = jnp.stack([_embed_mean(x, self.augment_mean) for x in means])
+        P = jnp.stack([_embed_cov(c, self.augment_var) for c in covs])
+        return X, P
+
+    def step(
+        self,
+        state: IMMState,
+        z: ArrayLike,
+        observed: ArrayLike | None = None,
+        *,
+        first_step: FirstStep = "update",
+    ) -> tuple[IMMState, IMMStepOutput]:
+        """One IMM cycle (interaction, member predict + update, mode update, combination).
+
+        **Arguments:**
+
+        - ``state``: the :class:`IMMState` after measurement ``k − 1`` (from :meth:`init` first).
+        - ``z``: measurement ``k``, ``(m,)``; ``observed``: optional boolean ``(m,)``.
+        - ``first_step``: ``"update"``: the priors and ``initial_probs`` sit at the first
+          measurement, so step 0 neither mixes nor predicts (``c̄ = initial_probs``);
+          ``"predict"``: they sit one transition before it, so step 0 is a full cycle.
+
+        **Returns:** ``(new_state, IMMStepOutput)``.
+        """
+        k = state.step
+        dtype = state.mode_probs.dtype
+        z = jnp.asarray(z, dtype)
+        observed = jnp.ones(z.shape, bool) if observed is None else jnp.asarray(observed)
+        z = jnp.where(observed, z, 0.0)
+        mu = state.mode_probs
+        p = self.transition_probs
+        # 1. c̄_j = Σ_i p_ij μ_i, μ_{i|j} = p_ij μ_i / c̄_j (BLK eqs. 11.6.6-6, -7). A mode no
+        # one can enter has c̄_j = 0: its mixing weights are set to 0 (guarded divisor, so that
+        # gradients stay finite); its likelihood weight is then 0 as well.
+        cbar = mu @ p
+        safe = jnp.where(cbar > 0, cbar, 1.0)
+        mix = jnp.where(cbar[None, :] > 0, p * mu[:, None] / safe[None, :], 0.0)  # (i, j)
+        X, P = self._common(state.means, state.covs)
+        at_start = (k == 0) if first_step == "update" else jnp.zeros((), bool)
+        log_cbar = jnp.log(jnp.where(at_start, mu, cbar))
+        posts = []
+        for j, (f, model) in enumerate(zip(self.filters, self.models)):
+            n = model.state_dim
+            # 2. mixed initial condition of member j (eqs. 11.6.6-8, -9), projected to its n_j.
+            x0, P0 = _moment_match(mix[:, j], X, P)
+            x0, P0 = x0[:n], P0[:n, :n]
+            # 3. the member's own predict and update (eq. 11.6.6-10).
+            pm, pc = f.predict(model, x0, P0, k)
+            if first_step == "update":
+                # The priors already sit at the first measurement: no mixing, no transition.
+                pm = jnp.where(at_start, state.means[j], pm)
+                pc = jnp.where(at_start, state.covs[j], pc)
+            posts.append(f.update(model, pm, pc, z, observed, k))
+        # 4. μ_j ∝ Λ_j c̄_j in log space (eqs. 11.6.6-11 … -13).
+        loglam = jnp.stack([c.log_likelihood for c in posts])
+        joint = loglam + log_cbar
+        step_ll = jax.scipy.special.logsumexp(joint)
+        new_mu = jnp.exp(joint - step_ll)
+        # 5. combined output (eqs. 11.6.6-14, -15).
+        Xp, Pp = self._common([c.mean for c in posts], [c.cov for c in posts])
+        mean, cov = _moment_match(new_mu, Xp, Pp)
+        ll = state.log_likelihood + step_ll
+        finite = jnp.all(jnp.isfinite(mean)) & jnp.all(jnp.isfinite(cov)) & jnp.isfinite(ll)
+        finite = finite & jnp.all(jnp.isfinite(new_mu))
+        new_state = IMMState(
+            tuple(c.mean for c in posts), tuple(c.cov for c in posts), new_mu, ll, k + 1, state.ok & finite
+        )
+        return new_state, IMMStepOutput(mean, cov, new_mu, loglam, step_ll)
+
+
+class IMMResult(eqx.Module):
+    """Output of :func:`run_imm` for one trajectory of ``T`` steps.
+
+    **Fields:** ``mean`` ``(T, N)``, ``cov`` ``(T, N, N)``: the combined ``x̂_{k/k}``, ``P_{k/k}``;
+    ``mode_probs`` ``(T, M)``; ``member_means``, ``member_covs``: tuples of ``(T, n_j)`` and
+    ``(T, n_j, n_j)``; ``member_log_likelihoods`` ``(T, M)``: ``log Λ_j`` per step;
+    ``log_likelihood`` ``()``: ``Σ_k log Σ_j Λ_j c̄_j``; ``ok`` ``()`` bool.
+    """
+
+    mean: Float[Array, "T N"]
+    cov: Float[Array, "T N N"]
+    mode_probs: Float[Array, "T M"]
+    member_means: tuple
+    member_covs: tuple
+    member_log_likelihoods: Float[Array, "T M"]
+    log_likelihood: Float[Array, ""]
+    ok: Bool[Array, ""]
+
+
+@eqx.filter_jit
+def _run_imm_jit(imm, z, observed, first_step, throw):
+    def body(state, inputs):
+        zk, ok = inputs
+        state, out = imm.step(state, zk, ok, first_step=first_step)
+        return state, (out, state.means, state.covs)
+
+    final, (out, means, covs) = jax.lax.scan(body, imm.init(), (z, observed))
+    result = IMMResult(
+        out.mean, out.cov, out.mode_probs, means, covs, out.member_log_likelihoods,
+        final.log_likelihood, final.ok,
+    )
+    if throw:
+        result = eqx.error_if(
+            result, ~result.ok,
+            "jaxtrack: the IMM produced a non-finite mean, covariance, mode probability or "
+            "log-likelihood. Pass throw=False to get the result with ok=False instead.",
+        )
+    return result
+
+
+def run_imm(
+    imm: InteractingMultipleModel,
+    measurements: ArrayLike,
+    *,
+    mask: ArrayLike | None = None,
+    first_step: FirstStep = "update",
+    nan_as_missing: bool = False,
+    throw: bool = True,
+) -> IMMResult:
+    """Run the IMM over ``measurements`` with one jitted ``lax.scan`` of :meth:`InteractingMultipleModel.step`.
+
+    **Arguments:**
+
+    - ``imm``: an :class:`InteractingMultipleModel`.
+    - ``measurements``: ``(T, m)`` (or ``(T,)`` when ``m = 1``), in the models' units.
+    - ``mask``: optional boolean ``(T,)`` or ``(T, m)``, True = observed (each member's update
+      drops the missing components; a fully missing step leaves ``μ = c̄``).
+    - ``first_step``: ``"update"`` (default; priors and ``initial_probs`` at the first
+      measurement) or ``"predict"`` (one transition before it), as in
+      :func:`~jaxtrack.filters.run_filter`.
+    - ``nan_as_missing``, ``throw``: as in :func:`~jaxtrack.filters.run_filter`.
+
+    **Returns:** an :class:`IMMResult`.
+
+    **Raises:** ``InputError`` for a wrong ``imm``, ``first_step``, shapes or mask.
+    """
+    if not isinstance(imm, InteractingMultipleModel):
+        raise InputError(f"`imm` must be an InteractingMultipleModel; got {type(imm).__name__}.")
+    if first_step not in ("update", "predict"):
+        raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
+    z = observed = None
+    for model in imm.models:
+        z, observed = prepare_measurements(model, measurements, mask, nan_as_missing)
+    return _run_imm_jit(imm, z, observed, first_step, throw)
