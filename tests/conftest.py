@@ -60,3 +60,15 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_code():
+    """Drop JAX's compilation caches after each test module.
+
+    The suite compiles thousands of programs; XLA's CPU compiler has crashed (SIGSEGV in
+    ``backend_compile``) late in long processes holding all of them. No test relies on a
+    compilation made by another module, so releasing them costs only recompiling shared helpers.
+    """
+    yield
+    jax.clear_caches()
