@@ -55,3 +55,4 @@ from ._imm import (
     InteractingMultipleModel as InteractingMultipleModel,
     run_imm as run_imm,
 )
+from ._imm_smoother import IMMSmootherResult as IMMSmootherResult, imm_smoother as imm_smoother
