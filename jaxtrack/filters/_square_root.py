@@ -31,6 +31,7 @@ from .._validation import InputError
 from ..models import LinearGaussianModel
 from ._base import AbstractFilter, FilterState
 from ._linalg import cholesky, matmul
+from ._unscented import sigma_points, unscented_weights
 from ._updates import Conditioned, masked_noise
 
 
@@ -205,30 +206,6 @@ class SquareRootKalmanFilter(_SquareRootFilter):
         return Conditioned(new_mean, new_chol, innovation, chol_S, ll, _gain(chol_S, cross))
 
 
-def unscented_weights(n: int, alpha: float, beta: float, kappa: float):
-    """The scaled unscented weights, as NumPy (known when tracing: the zeroth covariance weight's
-    sign chooses between a QR column and a Cholesky downdate).
-
-    ``λ = α²(n+κ) − n``, ``w_0 = λ/(n+λ)``, ``w_i = 1/(2(n+λ))``, ``w_0^c = w_0 + 1 − α² + β``
-    (Wan & van der Merwe 2000), the weights of :class:`~jaxtrack.filters.UnscentedKalmanFilter`.
-
-    **Arguments:** ``n`` the state dimension; ``alpha``, ``beta``, ``kappa`` (dimensionless).
-
-    **Returns:** ``(wm (2n+1,), wc (2n+1,), scale)`` with ``scale = √(n+λ)``.
-    """
-    lam = alpha**2 * (n + kappa) - n
-    if n + lam <= 0:
-        raise InputError(
-            f"SquareRootUnscentedKalmanFilter needs alpha²(n+kappa) > 0; got n={n}, alpha={alpha}, "
-            f"kappa={kappa}."
-        )
-    wm = np.full(2 * n + 1, 0.5 / (n + lam))
-    wm[0] = lam / (n + lam)
-    wc = wm.copy()
-    wc[0] += 1.0 - alpha**2 + beta
-    return wm, wc, (n + lam) ** 0.5
-
-
 def _weighted_factor(deviations: Array, wc: np.ndarray, extra: Array) -> Array:
     """Lower factor of ``Σ_i wc_i d_i d_iᵀ + E Eᵀ`` (rows ``d_i`` of ``deviations``, ``extra`` = E).
 
@@ -292,9 +269,7 @@ class SquareRootUnscentedKalmanFilter(_SquareRootFilter):
 
     def _sigma_points(self, mean, chol):
         wm, wc, scale = unscented_weights(mean.shape[0], self.alpha, self.beta, self.kappa)
-        n = mean.shape[0]
-        offsets = scale * jnp.concatenate([jnp.zeros((1, n), mean.dtype), chol.T, -chol.T])
-        return mean[None, :] + offsets, jnp.asarray(wm, mean.dtype), wc
+        return sigma_points(mean, chol, scale), jnp.asarray(wm, mean.dtype), wc
 
     def predict(self, model, mean, cov, k):
         points, wm, wc = self._sigma_points(mean, cov)

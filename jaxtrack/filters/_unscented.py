@@ -5,6 +5,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array
 
 from .._validation import InputError
@@ -27,6 +28,43 @@ def _weighted_sum(w, a):
 def _weighted_outer(w, a, b):
     """``Σ_i w_i a_i b_iᵀ`` over the sigma points (rows of ``a`` ``(p, n)`` and ``b`` ``(p, m)``)."""
     return _weighted_sum(w, a[:, :, None] * b[:, None, :])
+
+
+def unscented_weights(n: int, alpha: float, beta: float, kappa: float):
+    """The scaled unscented weights, as NumPy (known when tracing: the square-root UKF chooses by
+    the zeroth covariance weight's sign between a QR column and a Cholesky downdate).
+
+    ``λ = α²(n+κ) − n``, ``w_0 = λ/(n+λ)``, ``w_i = 1/(2(n+λ))``, ``w_0^c = w_0 + 1 − α² + β``
+    (Wan & van der Merwe 2000), the weights of both unscented filters.
+
+    **Arguments:** ``n`` the state dimension; ``alpha``, ``beta``, ``kappa`` (dimensionless).
+
+    **Returns:** ``(wm (2n+1,), wc (2n+1,), scale)`` with ``scale = √(n+λ)``.
+    """
+    lam = alpha**2 * (n + kappa) - n
+    if n + lam <= 0:
+        raise InputError(
+            f"the unscented filters need alpha²(n+kappa) > 0; got n={n}, alpha={alpha}, "
+            f"kappa={kappa}."
+        )
+    wm = np.full(2 * n + 1, 0.5 / (n + lam))
+    wm[0] = lam / (n + lam)
+    wc = wm.copy()
+    wc[0] += 1.0 - alpha**2 + beta
+    return wm, wc, (n + lam) ** 0.5
+
+
+def sigma_points(mean: Array, chol: Array, scale: float) -> Array:
+    """The ``2n+1`` sigma points ``x̂``, ``x̂ + scale·L_i``, ``x̂ − scale·L_i`` (``L_i`` the columns of the
+    lower factor ``chol``), shape ``(2n+1, n)``.
+
+    **Arguments:** ``mean`` ``(n,)``; ``chol`` ``(n, n)`` lower, ``P = L Lᵀ``; ``scale`` ``√(n+λ)``.
+
+    **Returns:** the points, ``(2n+1, n)``, in the state's units.
+    """
+    n = mean.shape[0]
+    offsets = scale * jnp.concatenate([jnp.zeros((1, n), mean.dtype), chol.T, -chol.T])
+    return mean[None, :] + offsets
 
 
 class UnscentedKalmanFilter(AbstractFilter):
@@ -55,22 +93,12 @@ class UnscentedKalmanFilter(AbstractFilter):
             raise InputError(f"`alpha` must be positive; got {self.alpha}.")
 
     def _weights(self, n: int, dtype):
-        lam = self.alpha**2 * (n + self.kappa) - n
-        if n + lam <= 0:
-            raise InputError(
-                f"UnscentedKalmanFilter needs alpha²(n+kappa) > 0; got n={n}, alpha={self.alpha}, "
-                f"kappa={self.kappa}."
-            )
-        wm = jnp.full(2 * n + 1, 0.5 / (n + lam), dtype).at[0].set(lam / (n + lam))
-        wc = wm.at[0].add(1.0 - self.alpha**2 + self.beta)
-        return wm, wc, (n + lam) ** 0.5
+        wm, wc, scale = unscented_weights(n, self.alpha, self.beta, self.kappa)
+        return jnp.asarray(wm, dtype), jnp.asarray(wc, dtype), scale
 
     def _sigma_points(self, mean, cov):
-        n = mean.shape[0]
-        wm, wc, scale = self._weights(n, mean.dtype)
-        chol = cholesky(cov)
-        offsets = scale * jnp.concatenate([jnp.zeros((1, n), mean.dtype), chol.T, -chol.T])
-        return mean[None, :] + offsets, wm, wc
+        wm, wc, scale = self._weights(mean.shape[0], mean.dtype)
+        return sigma_points(mean, cholesky(cov), scale), wm, wc
 
     def predict(self, model, mean, cov, k):
         points, wm, wc = self._sigma_points(mean, cov)
