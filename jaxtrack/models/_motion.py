@@ -240,10 +240,16 @@ class LinearTransition(AbstractTransitionModel):
 class _AbstractKinematic(AbstractTransitionModel):
     """Shared body of the polynomial (CV/CA) components: ``F = F_1d(τ) ⊗ I_d``, ``Q = Q_1d(τ) ⊗ diag(q)``."""
 
-    sample_period: eqx.AbstractVar[Array]
-    noise_intensity: eqx.AbstractVar[Array]
-    dim: eqx.AbstractVar[int]
+    # The fields and constructor are shared: the subclasses differ only in their 1-D blocks.
+    sample_period: Float[Array, "*T"]
+    noise_intensity: Float[Array, " d"]
+    dim: int = eqx.field(static=True)
     _order: ClassVar[int]  # states per axis: 2 (p, v) or 3 (p, v, a)
+
+    def __init__(self, sample_period: ArrayLike, noise_intensity: ArrayLike, *, dim: int = 2):
+        self.dim = _check_dim(dim)
+        self.sample_period = check_taus("sample_period", sample_period)
+        self.noise_intensity = _per_axis("noise_intensity", noise_intensity, self.dim)
 
     @abc.abstractmethod
     def _blocks(self, tau):
@@ -292,15 +298,6 @@ class ConstantVelocity(_AbstractKinematic):
     **Raises:** ``InputError`` naming ``sample_period``, ``noise_intensity`` or ``dim``.
     """
 
-    sample_period: Float[Array, "*T"]
-    noise_intensity: Float[Array, " d"]
-    dim: int = eqx.field(static=True)
-
-    def __init__(self, sample_period: ArrayLike, noise_intensity: ArrayLike, *, dim: int = 2):
-        self.dim = _check_dim(dim)
-        self.sample_period = check_taus("sample_period", sample_period)
-        self.noise_intensity = _per_axis("noise_intensity", noise_intensity, self.dim)
-
     _order: ClassVar[int] = 2
 
     def _blocks(self, tau):
@@ -324,15 +321,6 @@ class ConstantAcceleration(_AbstractKinematic):
 
     **Raises:** ``InputError`` naming ``sample_period``, ``noise_intensity`` or ``dim``.
     """
-
-    sample_period: Float[Array, "*T"]
-    noise_intensity: Float[Array, " d"]
-    dim: int = eqx.field(static=True)
-
-    def __init__(self, sample_period: ArrayLike, noise_intensity: ArrayLike, *, dim: int = 2):
-        self.dim = _check_dim(dim)
-        self.sample_period = check_taus("sample_period", sample_period)
-        self.noise_intensity = _per_axis("noise_intensity", noise_intensity, self.dim)
 
     _order: ClassVar[int] = 3
 
