@@ -12,7 +12,7 @@ import pytest
 
 from jaxtrack.models import LinearGaussianModel
 from jaxtrack.montecarlo import monte_carlo
-from jaxtrack.montecarlo._run import PRECISION_MARGIN
+from jaxtrack.montecarlo._result import PRECISION_MARGIN
 
 
 def _long_tiny_noise_model(dtype):

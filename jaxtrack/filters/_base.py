@@ -133,7 +133,9 @@ class AbstractFilter(eqx.Module):
         """
         return False
 
-    def consistency(self, conditioned: Conditioned, error: Array) -> tuple[Array, Array]:
+    def consistency(
+        self, conditioned: Conditioned, error: Array, components: tuple[int, ...] | None = None
+    ) -> tuple[Array, Array]:
         """NEES and NIS of one step: ``eᵀ P⁻¹ e`` for the estimation error ``e`` and ``yᵀ S⁻¹ y``.
 
         The hook :mod:`jaxtrack.montecarlo` scores every run with, so that a filter carrying its
@@ -144,14 +146,20 @@ class AbstractFilter(eqx.Module):
 
         - ``conditioned``: the step's :class:`Conditioned` (filtered covariance, innovation and
           its covariance, missing components decoupled).
-        - ``error``: ``x − x̂_{k/k}``, ``(n,)``, in the state's units.
+        - ``error``: ``x − x̂_{k/k}`` in the state's units: ``(n,)``, or ``(len(components),)``.
+        - ``components``: None (the whole state), or the state indices ``error`` holds; the NEES
+          is then that of the marginal ``P[c, c]`` (the sub-state's own χ²(len(c)) statistic).
 
         **Returns:** ``(nees, nis)``, two dimensionless scalars.
         """
         from ..montecarlo._metrics import normalized_squared_error
 
+        cov = conditioned.cov
+        if components is not None:
+            idx = np.asarray(components)
+            cov = cov[idx[:, None], idx[None, :]]
         return (
-            normalized_squared_error(error, conditioned.cov),
+            normalized_squared_error(error, cov),
             normalized_squared_error(conditioned.innovation, conditioned.innovation_cov),
         )
 

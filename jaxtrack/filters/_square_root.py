@@ -123,9 +123,18 @@ def _gain(chol_S: Array, cross: Array) -> Array:
     return jsl.solve_triangular(chol_S, cross.T, lower=True, trans="T").T
 
 
-def _factor_consistency(conditioned: Conditioned, error: Array) -> tuple[Array, Array]:
-    """NEES and NIS from the factors: ``‖L⁻¹ e‖²`` and ``‖L_S⁻¹ y‖²``, never forming ``P``."""
-    whitened_error = _solve_lower(conditioned.cov, error)
+def _factor_consistency(conditioned: Conditioned, error: Array, components=None) -> tuple[Array, Array]:
+    """NEES and NIS from the factors: ``‖L⁻¹ e‖²`` and ``‖L_S⁻¹ y‖²``, never forming ``P``.
+
+    For a sub-state ``c`` the marginal covariance is ``L_c L_cᵀ`` with ``L_c = L[c, :]`` (rows);
+    the QR factorisation ``L_cᵀ = Q R`` gives ``L_c L_cᵀ = Rᵀ R``, so ``Rᵀ`` is a lower factor of
+    the marginal, again without forming a covariance.
+    """
+    factor = conditioned.cov
+    if components is not None:
+        rows = factor[np.asarray(components), :]
+        factor = jnp.linalg.qr(rows.T, mode="r").T
+    whitened_error = _solve_lower(factor, error)
     whitened_innovation = _solve_lower(conditioned.innovation_cov, conditioned.innovation)
     return whitened_error @ whitened_error, whitened_innovation @ whitened_innovation
 
@@ -140,15 +149,18 @@ class _SquareRootFilter(AbstractFilter):
         state = super().init(model)
         return eqx.tree_at(lambda s: s.cov, state, cholesky(model.initial_cov))
 
-    def consistency(self, conditioned: Conditioned, error: Array) -> tuple[Array, Array]:
+    def consistency(
+        self, conditioned: Conditioned, error: Array, components: tuple[int, ...] | None = None
+    ) -> tuple[Array, Array]:
         """NEES ``‖L⁻¹ e‖²`` and NIS ``‖L_S⁻¹ y‖²`` by triangular solves with the factors.
 
         **Arguments:** ``conditioned``: the step's :class:`Conditioned` (factors in ``cov`` and
-        ``innovation_cov``); ``error``: ``x − x̂_{k/k}``, ``(n,)``.
+        ``innovation_cov``); ``error``: ``x − x̂_{k/k}``, ``(n,)`` or ``(len(components),)``;
+        ``components``: as in :meth:`AbstractFilter.consistency` (marginal NEES).
 
         **Returns:** ``(nees, nis)``, two dimensionless scalars.
         """
-        return _factor_consistency(conditioned, error)
+        return _factor_consistency(conditioned, error, components)
 
 
 class SquareRootKalmanFilter(_SquareRootFilter):

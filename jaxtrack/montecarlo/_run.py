@@ -29,7 +29,6 @@ the key and the run indices.
 
 from __future__ import annotations
 
-import warnings
 from typing import Any, Callable, NamedTuple, Sequence
 
 import equinox as eqx
@@ -37,10 +36,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh
-from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
+from jaxtyping import Array, ArrayLike, PRNGKeyArray
 
 from .._validation import InputError, check_shape
-from ..filters import AbstractFilter, KalmanFilter, mean_step
+from ..filters import AbstractFilter, InteractingMultipleModel, KalmanFilter, mean_step
 from ..filters._base import FirstStep
 from ..filters._batch import (
     CovarianceMode,
@@ -51,7 +50,8 @@ from ..filters._batch import (
 )
 from ..filters._linalg import all_rows, cholesky_and_inverse, matmul, sum_rows
 from ..models import AbstractStateSpaceModel
-from ._metrics import chi2_mean_bounds
+from ._metrics import normalized_squared_error
+from ._result import MonteCarloResult, _Sums, _summarize, _zero_sums
 from ._noise import key_words, step_normals
 from ._engine import block_size_for, check_mesh, run_blocks
 from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
@@ -64,80 +64,6 @@ from ._simulate import (
     noise_factors,
     step_keys,
 )
-
-
-class _Sums(NamedTuple):
-    """Per-step sums over the runs seen so far (all float64 under the default precision)."""
-
-    error: Array  # (T, n): Σ (x − x̂)
-    squared_error: Array  # (T, n): Σ (x − x̂)²
-    nees: Array  # (T,): Σ NEES
-    nees_sq: Array  # (T,): Σ NEES², for the empirical spread
-    nis: Array  # (T,): Σ NIS
-    num_ok: Array  # (): runs that stayed finite
-    num_failed: Array  # (): runs that produced a non-finite value (excluded from the sums)
-    nis_dof: Array  # (T,): Σ observed measurement components (NIS degrees of freedom) over the runs
-
-
-class MonteCarloResult(eqx.Module):
-    """Statistics of a Monte Carlo run of ``num_runs`` runs over ``T`` steps.
-
-    **Fields:**
-
-    - ``mse`` ``(T, n)``: mean squared error of each state component at each step.
-    - ``mean_error`` ``(T, n)``: mean of ``x − x̂`` (the bias; 0 for a linear filter).
-    - ``nees`` ``(T,)``: NEES averaged over runs; ``nees_bounds`` ``(T, 2)`` its two-sided bounds.
-    - ``nees_std`` ``(T,)``: the empirical standard deviation of NEES over runs.
-    - ``nis`` ``(T,)``: NIS averaged over runs; ``nis_dof`` ``(T,)`` its degrees of freedom (the
-      measurement components observed, averaged over the runs: with per-run detections or
-      masks, a run's NIS at step ``k`` is χ²(d_ik) with ``d_ik`` its own observed components);
-      ``nis_bounds`` ``(T, 2)``: the bounds of the run average, from χ²(Σ_i d_ik) / M (a sum of
-      independent χ²(d_i) is χ²(Σ d_i)); ``[0, 0]`` at steps no run observed.
-    - ``anees`` ``()``: NEES averaged over runs and steps and divided by ``n`` (1 when
-      consistent). ``anees_bounds`` ``(2,)``: the per-step χ²(M·n)/(M·n) bounds. Averaging over
-      steps cannot increase the variance of the per-step average (steps are positively
-      correlated at worst completely), so these bounds are valid and conservative for ``anees``.
-    - ``num_runs``: runs that contributed; ``num_failed``: runs excluded because the filter
-      produced a non-finite value (a warning is issued when this is not 0).
-    - ``confidence``: the probability content of the bounds (default 0.95).
-    - ``shared_covariance``: True when the filter's covariances were computed once for all runs
-      (see :func:`monte_carlo`), False when every run carried its own.
-    - ``precision_warning``: True when the statistics were accumulated in a floating type
-      narrower than float64 and the ANEES or the mean NIS exceed ``PRECISION_MARGIN`` (10) times
-      their upper bounds (a ``RuntimeWarning`` naming float32 is issued too). A mismodelled
-      filter rarely exceeds its bound by more than a few times; float32 round-off of a
-      near-singular covariance (long runs, tiny process noise, large states) gives 10²–10⁵.
-      Float64 results never set it: there such a ratio is a modelling error, not round-off.
-    """
-
-    mse: Float[Array, "T n"]
-    mean_error: Float[Array, "T n"]
-    nees: Float[Array, " T"]
-    nees_std: Float[Array, " T"]
-    nees_bounds: Float[Array, "T 2"]
-    nis: Float[Array, " T"]
-    nis_dof: Float[Array, " T"]
-    nis_bounds: Float[Array, "T 2"]
-    anees: Float[Array, ""]
-    anees_bounds: Float[Array, " 2"]
-    num_runs: int = eqx.field(static=True)
-    num_failed: int = eqx.field(static=True)
-    confidence: float = eqx.field(static=True)
-    shared_covariance: bool = eqx.field(static=True, default=False)
-    precision_warning: bool = eqx.field(static=True, default=False)
-
-    def rmse(self, components: tuple[int, ...] | None = None) -> Float[Array, " T"]:
-        """Root of the summed mean squared error over ``components`` (all states if None).
-
-        For a 2-D constant-velocity state ``[x, y, vx, vy]``, ``rmse((0, 1))`` is the position RMSE.
-        """
-        mse = self.mse if components is None else self.mse[:, jnp.asarray(components)]
-        return jnp.sqrt(jnp.sum(mse, axis=-1))
-
-    def fraction_nees_inside(self) -> Float[Array, ""]:
-        """Fraction of steps whose run-averaged NEES lies within its bounds (≈ confidence)."""
-        inside = (self.nees >= self.nees_bounds[:, 0]) & (self.nees <= self.nees_bounds[:, 1])
-        return jnp.mean(inside)
 
 
 # Runs per compiled block. The block is the unit of compilation and of device work; it does
@@ -155,6 +81,7 @@ class _StepSums(NamedTuple):
     nees: Array  # ()
     nees_sq: Array  # ()
     nis: Array  # ()
+    mode_probs: Array  # (K,): an IMM's mode probabilities (K = 0 for one filter)
 
 
 def _run_keys(key, start, block):
@@ -186,64 +113,89 @@ def _simulated_block(truth, factors, first_step, key, start, block):
     return x0, step_normals(words, 0, num, dtype), truth_step
 
 
-def _per_run_block(filter, filter_model, truth, factors, observed, first_step, key, start, use):
+def _scored(x, mean, components):
+    """``x[tc] − x̂[fc]``: the truth and the filter compared on the scored components."""
+    tc, fc = components
+    x = x if tc is None else x[np.asarray(tc)]
+    return x - (mean if fc is None else mean[np.asarray(fc)])
+
+
+def _per_run_block(filter, filter_model, truth, factors, observed, first_step, components, key, start, use):
     """Per-run covariance path for one block: a scan over steps of the ``vmap``-ed filter step.
 
     Every run carries its own filter state; each step simulates the block's truth, filters (the
-    single step function :func:`~jaxtrack.filters.filter_step`, ``vmap``-ed over runs) and adds
-    the step's error, NEES and NIS of the runs where ``use`` to the per-step sums. ``observed``
-    is the schedule shared by the runs, ``(T, m)``, or each run's own, ``(T, block, m)``.
+    single step function :meth:`~jaxtrack.filters.AbstractFilter.step`, or
+    :meth:`~jaxtrack.filters.InteractingMultipleModel.step`, ``vmap``-ed over runs) and adds
+    the step's error, NEES and NIS (and an IMM's mode probabilities) of the runs where ``use``
+    to the per-step sums. ``observed`` is the schedule shared by the runs, ``(T, m)``, or each
+    run's own, ``(T, block, m)``; ``components`` the scored ``(truth, filter)`` indices.
     Returns ``(per-step sums, ok per run)``.
     """
     block = use.shape[0]
     x0, eps0, truth_step = _simulated_block(truth, factors, first_step, key, start, block)
+    fc = components[1]
+    imm = isinstance(filter, InteractingMultipleModel)
 
     def one(filt, x, z, k, obs):
+        if imm:
+            # An IMM has no single innovation: NIS is not scored (0, with 0 degrees of freedom).
+            filt, out = filter.step(filt, z, obs, first_step=first_step)
+            error = _scored(x, out.mean, components)
+            cov = out.cov if fc is None else out.cov[np.asarray(fc)[:, None], np.asarray(fc)[None, :]]
+            return filt, error, normalized_squared_error(error, cov), jnp.zeros((), error.dtype), out.mode_probs
         filt, (_, _, post) = filter.step(filter_model, filt, z, obs, first_step=first_step)
-        error = x - post.mean
-        nees, nis = filter.consistency(post, error)
-        return filt, error, nees, nis
+        error = _scored(x, post.mean, components)
+        nees, nis = filter.consistency(post, error, fc)
+        return filt, error, nees, nis, jnp.zeros((0,), error.dtype)
 
     def step(carry, inputs):
         filt, x_prev, eps, ok = carry
         k, obs = inputs
         x, z, eps = truth_step(x_prev, eps, k)
-        filt, error, nees, nis = jax.vmap(one, in_axes=(0, 1, 1, None, obs_axis))(filt, x, z, k, obs)
+        filt, error, nees, nis, modes = jax.vmap(one, in_axes=(0, 1, 1, None, obs_axis))(filt, x, z, k, obs)
         ok = ok & filt.ok & jnp.isfinite(nees) & jnp.isfinite(nis)
-        return (filt, x, eps, ok), _masked_sums(use, error, nees, nis, axis=0)
+        return (filt, x, eps, ok), _masked_sums(use, error, nees, nis, axis=0, modes=modes)
 
     obs_axis = None if observed.ndim == 2 else 0
-    filt0 = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (block,) + a.shape), filter.init(filter_model))
+    init_state = filter.init() if imm else filter.init(filter_model)
+    filt0 = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (block,) + a.shape), init_state)
     ks = jnp.arange(observed.shape[0])
     init = (filt0, x0, eps0, jnp.ones((block,), bool))
     (_, _, _, ok), sums = jax.lax.scan(step, init, (ks, observed))
     return sums, ok
 
 
-def _masked_sums(use, error, nees, nis, axis):
+def _masked_sums(use, error, nees, nis, axis, modes=None):
     """Sums over the runs (``axis`` of ``error``) where ``use``.
 
     The terms are stacked and summed by one product with the 0/1 weights (one kernel instead of
     five reductions). Excluded runs are zeroed first, not only weighted, because an excluded run
-    may hold NaN and NaN·0 is NaN.
+    may hold NaN and NaN·0 is NaN. ``modes``: ``(block, K)`` mode probabilities, or None.
     """
     n = error.shape[0 if axis == -1 else 1]
     if axis == 0:
         error = error.T
-    terms = jnp.concatenate([error, error * error, jnp.stack([nees, nees * nees, nis])])
+    parts = [error, error * error, jnp.stack([nees, nees * nees, nis])]
+    K = 0 if modes is None else modes.shape[-1]
+    if K:
+        parts.append(modes.T)
+    terms = jnp.concatenate(parts)
     terms = jnp.where(use[None, :], terms, 0.0)
     sums = terms @ use.astype(terms.dtype)
-    return _StepSums(sums[:n], sums[n:2 * n], sums[2 * n], sums[2 * n + 1], sums[2 * n + 2])
+    return _StepSums(sums[:n], sums[n:2 * n], sums[2 * n], sums[2 * n + 1], sums[2 * n + 2],
+                     sums[2 * n + 3:2 * n + 3 + K])
 
 
-def _shared_block(truth, factors, filter_model, cov, maps, nees_factor, observed, first_step, key, start, use):
+def _shared_block(truth, factors, filter_model, cov, maps, nees_factor, observed, first_step, components, key, start,
+                  use):
     """Shared-covariance path for one block: truth, measurements and means of ``block`` runs.
 
     The filter's covariances, gains and the inverse Cholesky factors that NEES and NIS need are
     the same for every run (``cov``, ``maps``, ``nees_factor``: computed once per Monte Carlo
     call); only the truth and the estimates are per run, held as ``(n, block)`` matrices so that
     each step is a few element-wise loops over the block. The draws are those of
-    :func:`simulate` for the same run key. Returns ``(per-step sums, ok per run)``.
+    :func:`simulate` for the same run key; ``components`` the scored ``(truth, filter)`` indices
+    (``nees_factor`` is then that of the marginal covariance). Returns ``(per-step sums, ok per run)``.
     """
     block = use.shape[0]
     x0, eps0, truth_step = _simulated_block(truth, factors, first_step, key, start, block)
@@ -254,7 +206,7 @@ def _shared_block(truth, factors, filter_model, cov, maps, nees_factor, observed
         k, obs, gain, s_inv, p_inv, mp = inputs
         x, z, eps = truth_step(x_prev, eps, k)
         post, innovation = mean_step(mp, gain, est, z, obs)
-        error = x - post
+        error = _scored(x, post, components)
         w_e = matmul(p_inv, error)
         w_y = matmul(s_inv, innovation)
         nees = sum_rows(w_e * w_e)
@@ -270,14 +222,19 @@ def _shared_block(truth, factors, filter_model, cov, maps, nees_factor, observed
 
 
 @eqx.filter_jit
-def _shared_setup(filter, filter_model, truth, observed, first_step):
+def _shared_setup(filter, filter_model, truth, observed, first_step, filter_components=None):
     """Once per Monte Carlo call: noise factors of the truth, the filter's shared covariances,
-    its mean maps and the inverse Cholesky factors of the filtered covariances (for NEES)."""
+    its mean maps and the inverse Cholesky factors of the filtered covariances (for NEES; of
+    their marginals over ``filter_components`` when given)."""
     num_steps = observed.shape[0]
     factors = noise_factors(truth, num_steps)
     cov = shared_covariances(filter, filter_model, observed, first_step)
     maps = mean_maps(filter, filter_model, cov.gain, first_step)
-    nees_factor = jax.vmap(cholesky_and_inverse)(cov.filtered_cov)[1]
+    scored = cov.filtered_cov
+    if filter_components is not None:
+        idx = np.asarray(filter_components)
+        scored = scored[:, idx[:, None], idx[None, :]]
+    nees_factor = jax.vmap(cholesky_and_inverse)(scored)[1]
     return factors, cov, maps, nees_factor
 
 
@@ -286,13 +243,15 @@ class _Common(eqx.Module):
 
     ``detection`` (``P_D`` per step) and ``run_mask`` (every run's own mask) are None unless
     given; either one gives every run its own schedule (:func:`_block_observed`).
+    ``components``: the scored ``(truth_components, filter_components)``, each None for all.
     """
 
-    filter: AbstractFilter
+    filter: AbstractFilter | InteractingMultipleModel
     observed: Array  # (T, m)
     first_step: str = eqx.field(static=True)
     detection: Array | None = None  # (T,) detection probability
     run_mask: Array | None = None  # (M, T, m) per-run masks
+    components: tuple = eqx.field(static=True, default=(None, None))
 
 
 def _block_observed(common: _Common, key, start, block, dtype):
@@ -338,65 +297,111 @@ def _block_delta(common: _Common, models: _Models, key, start, valid) -> _Sums:
     function of its start index and the key, so where it runs (which device, which host) cannot
     change it.
     """
-    filter, observed, first_step = common.filter, common.observed, common.first_step
+    filter, observed, first_step, components = common.filter, common.observed, common.first_step, common.components
     truth, filter_model, setup = models.truth, models.filter_model, models.setup
     per_run_obs = _block_observed(common, key, start, valid.shape[0], truth.initial_mean.dtype)
     if setup is None:
         factors = noise_factors(truth, observed.shape[0])
         obs = observed if per_run_obs is None else per_run_obs
         run = lambda use: _per_run_block(  # noqa: E731
-            filter, filter_model, truth, factors, obs, first_step, key, start, use)
+            filter, filter_model, truth, factors, obs, first_step, components, key, start, use)
     else:
         factors, cov, maps, nees_factor = setup
         run = lambda use: _shared_block(  # noqa: E731
-            truth, factors, filter_model, cov, maps, nees_factor, observed, first_step, key, start, use)
+            truth, factors, filter_model, cov, maps, nees_factor, observed, first_step, components, key, start, use)
     step_sums, ok = run(valid)
     use = valid & ok
     step_sums = jax.lax.cond(jnp.all(ok | ~valid), lambda: step_sums, lambda: run(use)[0])
     w = use.astype(step_sums.nees.dtype)
     # NIS degrees of freedom of the runs that count: integers, summed exactly in any order.
-    if per_run_obs is None:
+    if isinstance(filter, InteractingMultipleModel):  # NIS not scored (no single innovation)
+        dof = jnp.zeros(observed.shape[:1], w.dtype)
+    elif per_run_obs is None:
         dof = jnp.sum(observed, axis=-1).astype(w.dtype) * jnp.sum(w)
     else:
         dof = jnp.sum(per_run_obs, axis=-1).astype(w.dtype) @ w
-    return _Sums(*step_sums, jnp.sum(w), jnp.sum((valid & ~ok).astype(w.dtype)), dof)
+    e, e2, nees, nees2, nis, modes = step_sums
+    return _Sums(e, e2, nees, nees2, nis, jnp.sum(w), jnp.sum((valid & ~ok).astype(w.dtype)), dof, modes)
 
 
 class _Prepared(NamedTuple):
-    filter: AbstractFilter
-    filter_model: AbstractStateSpaceModel
+    filter: AbstractFilter | InteractingMultipleModel
+    filter_model: AbstractStateSpaceModel | None  # None for an IMM (it holds its members' models)
     num_steps: int
     observed: Array
     shared: bool
     block: int
     detection: Array | None  # (T,) P_D, or None
     run_mask: Array | None  # (M, T, m), or None
+    components: tuple  # (truth_components, filter_components), each None for all
+    num_scored: int  # n, the scored components
+    num_modes: int  # K, an IMM's modes (0 for one filter)
+
+
+def _check_components(name, components, dim):
+    """``components``: None, or distinct state indices in ``[0, dim)``; returned as a tuple of ints."""
+    if components is None:
+        return None
+    try:
+        out = tuple(int(c) for c in components)
+    except TypeError:
+        raise InputError(f"`{name}` must be a sequence of state indices; got {components!r}.") from None
+    if not out or len(set(out)) != len(out) or min(out) < 0 or max(out) >= dim:
+        raise InputError(f"`{name}` must hold distinct state indices in [0, {dim}); got {out}.")
+    return out
+
+
+def _prepare_models(truth, filter, filter_model, truth_components, filter_components):
+    """The filter and its model(s), checked against the truth; the scored components."""
+    filter = KalmanFilter() if filter is None else filter
+    imm = isinstance(filter, InteractingMultipleModel)
+    if imm and filter_model is not None:
+        raise InputError("`filter_model` must be None when `filter` is an InteractingMultipleModel "
+                         "(the IMM holds its members' models).")
+    filter_model = None if imm else (truth if filter_model is None else filter_model)
+    if not (imm or isinstance(filter, AbstractFilter)):
+        raise InputError(f"`filter` must be a jaxtrack filter or an InteractingMultipleModel; "
+                         f"got {type(filter).__name__}.")
+    for name, model in (("truth", truth),) + ((("filter_model", filter_model),) if not imm else ()):
+        if not isinstance(model, AbstractStateSpaceModel):
+            raise InputError(f"`{name}` must be a jaxtrack state-space model; got {type(model).__name__}.")
+    if not imm:
+        filter.check_model(filter_model)
+    n_f = filter.state_dim if imm else filter_model.state_dim
+    m_f = filter.models[0].meas_dim if imm else filter_model.meas_dim
+    if m_f != truth.meas_dim:
+        who = "`filter`'s member models measure" if imm else "`filter_model` measures"
+        raise InputError(f"{who} {m_f} components but `truth` measures {truth.meas_dim}.")
+    tc = _check_components("truth_components", truth_components, truth.state_dim)
+    fc = _check_components("filter_components", filter_components, n_f)
+    n_t = truth.state_dim if tc is None else len(tc)
+    n_s = n_f if fc is None else len(fc)
+    if n_t != n_s:
+        what = "`filter_model`" if tc is None and fc is None and not imm else "the scored filter components"
+        raise InputError(
+            f"{what} compare {n_s} state components with {n_t} of `truth` (state sizes: filter {n_f}, truth "
+            f"{truth.state_dim}); pass `truth_components` and `filter_components` to say which correspond."
+        )
+    return filter, filter_model, (tc, fc), n_s, (filter.num_modes if imm else 0)
 
 
 def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance,
-             detection_probability=None):
+             detection_probability=None, truth_components=None, filter_components=None):
     """Validate a Monte Carlo call; choose the path and the block size."""
-    filter = KalmanFilter() if filter is None else filter
-    filter_model = truth if filter_model is None else filter_model
-    if not isinstance(filter, AbstractFilter):
-        raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
-    for name, model in (("truth", truth), ("filter_model", filter_model)):
-        if not isinstance(model, AbstractStateSpaceModel):
-            raise InputError(f"`{name}` must be a jaxtrack state-space model; got {type(model).__name__}.")
-    filter.check_model(filter_model)
-    if (filter_model.state_dim, filter_model.meas_dim) != (truth.state_dim, truth.meas_dim):
-        raise InputError(
-            f"`filter_model` has (state, measurement) sizes {(filter_model.state_dim, filter_model.meas_dim)} "
-            f"but `truth` has {(truth.state_dim, truth.meas_dim)}."
-        )
+    filter, filter_model, components, num_scored, num_modes = _prepare_models(
+        truth, filter, filter_model, truth_components, filter_components)
     if not isinstance(num_runs, int) or num_runs < 1:
         raise InputError(f"`num_runs` must be a positive int; got {num_runs!r}.")
     if not isinstance(chunk_size, int) or chunk_size < 1:
         raise InputError(f"`chunk_size` must be a positive int; got {chunk_size!r}.")
     if first_step not in ("update", "predict"):
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
-    num_steps = _resolve_num_steps(truth, num_steps if num_steps is not None else filter_model.num_steps)
-    _resolve_num_steps(filter_model, num_steps)
+    filter_models = filter.models if filter_model is None else (filter_model,)
+    if num_steps is None:
+        num_steps = next((fm.num_steps for fm in filter_models if fm.num_steps is not None), None)
+    num_steps = _resolve_num_steps(truth, num_steps)
+    for fm in filter_models:
+        _resolve_num_steps(fm, num_steps)
     m = truth.meas_dim
     observed, run_mask = jnp.ones((num_steps, m), bool), None
     if mask is not None:
@@ -422,14 +427,16 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
             + ": every run then has its own measurement schedule, so the filter's covariances and gains "
             "differ from run to run and cannot be computed once for all; use covariance='auto' or 'per_run'."
         )
-    shared = resolve_covariance(covariance, filter, filter_model, schedule_is_shared).shared
+    if filter_model is None:  # an IMM: every run carries its own mixture
+        if covariance == "shared" or isinstance(covariance, SharedCovariance):
+            raise InputError("`covariance='shared'` does not apply to an InteractingMultipleModel: its mode "
+                             "probabilities, hence its covariances, depend on each run's data.")
+        shared = False
+    else:
+        shared = resolve_covariance(covariance, filter, filter_model, schedule_is_shared).shared
     block = block_size_for(num_runs, _SHARED_BLOCK if shared else _PER_RUN_BLOCK)
-    return _Prepared(filter, filter_model, num_steps, observed, shared, block, detection, run_mask)
-
-
-def _zero_sums(num_steps, n, dtype, lead=()):
-    z = lambda *shape: jnp.zeros(lead + shape, dtype)  # noqa: E731
-    return _Sums(z(num_steps, n), z(num_steps, n), z(num_steps), z(num_steps), z(num_steps), z(), z(), z(num_steps))
+    return _Prepared(filter, filter_model, num_steps, observed, shared, block, detection, run_mask, components,
+                     num_scored, num_modes)
 
 
 def monte_carlo(
@@ -449,6 +456,8 @@ def monte_carlo(
     covariance: CovarianceMode = "auto",
     mesh: Mesh | None = None,
     mesh_axis: str = RUN_AXIS,
+    truth_components: Sequence[int] | None = None,
+    filter_components: Sequence[int] | None = None,
 ) -> MonteCarloResult:
     """Monte Carlo evaluation of a filter: ``num_runs`` simulated runs, streaming statistics.
 
@@ -511,23 +520,35 @@ def monte_carlo(
       per-run schedules raises ``InputError``).
     - ``mesh``, ``mesh_axis``: a ``jax.sharding.Mesh`` and the name of its axis to share runs
       along (default ``"runs"``); None runs on the default device.
+    - ``truth_components``, ``filter_components``: when the filter's state is not the truth's
+      (a 4-state constant-velocity filter on a truth with a turn rate, a 5-state turn filter on
+      a 4-state truth), the truth indices and the filter indices that correspond, in the same
+      order, equally many; None means all of that state. Errors, MSE and NEES are over these
+      components only; the NEES is that of the filter's marginal covariance over them
+      (χ²(len) when consistent).
+
+    **IMM.** ``filter`` may be an :class:`~jaxtrack.filters.InteractingMultipleModel`
+    (``filter_model`` None: the IMM holds its members' models). Every run then carries its own
+    mixture; the combined estimate (BLK 2001 eqs. 11.6.6-14, -15) is scored, the mean mode
+    probabilities per step are streamed into ``mode_probs`` ``(T, K)``, and NIS is not scored
+    (the IMM has no single innovation; ``nis`` and ``nis_dof`` are 0).
 
     **Returns:** a :class:`MonteCarloResult`.
     """
     prep = _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance,
-                    detection_probability)
-    filter, filter_model, num_steps, observed, shared, block, detection, run_mask = prep
-    setup = _shared_setup(filter, filter_model, truth, observed, first_step) if shared else None
+                    detection_probability, truth_components, filter_components)
+    filter_model, num_steps, shared = prep.filter_model, prep.num_steps, prep.shared
+    setup = (_shared_setup(prep.filter, filter_model, truth, prep.observed, first_step, prep.components[1])
+             if shared else None)
     if mesh is not None:
         check_mesh(mesh, (mesh_axis,))
-    n = truth.state_dim
     sums = run_blocks(
-        _block_delta, _zero_sums(num_steps, n, filter_model.initial_cov.dtype),
-        common=_Common(filter, observed, first_step, detection, run_mask),
+        _block_delta, _zero_sums(num_steps, prep.num_scored, truth.initial_cov.dtype, num_modes=prep.num_modes),
+        common=_Common(prep.filter, prep.observed, first_step, prep.detection, prep.run_mask, prep.components),
         value=_Models(truth, filter_model, setup), key=key,
-        num_runs=num_runs, block=block, mesh=mesh, run_axis=mesh_axis, chunk_size=chunk_size,
+        num_runs=num_runs, block=prep.block, mesh=mesh, run_axis=mesh_axis, chunk_size=chunk_size,
         progress=progress, desc="Monte Carlo")
-    return _summarize(sums, n, confidence, shared)
+    return _summarize(sums, prep.num_scored, confidence, shared, prep.components[1])
 
 
 def monte_carlo_sweep(
@@ -548,6 +569,8 @@ def monte_carlo_sweep(
     mesh: Mesh | None = None,
     sweep_axis: str = SWEEP_AXIS,
     run_axis: str = RUN_AXIS,
+    truth_components: Sequence[int] | None = None,
+    filter_components: Sequence[int] | None = None,
 ) -> list[MonteCarloResult]:
     """Monte Carlo at every value of a parameter: one :class:`MonteCarloResult` per value.
 
@@ -585,7 +608,8 @@ def monte_carlo_sweep(
         truth, filter_model = built if isinstance(built, tuple) else (built, None)
         pairs.append((truth, filter_model))
     preps = [
-        _prepare(t, num_runs, num_steps, filter, fm, mask, first_step, chunk_size, covariance, detection_probability)
+        _prepare(t, num_runs, num_steps, filter, fm, mask, first_step, chunk_size, covariance, detection_probability,
+                 truth_components, filter_components)
         for t, fm in pairs
     ]
     pairs = [(t, p.filter_model) for (t, _), p in zip(pairs, preps)]
@@ -605,7 +629,8 @@ def monte_carlo_sweep(
                 f"The models built for value {j} differ in structure or shapes from those of value 0; "
                 "a sweep needs models that stack (same types, static fields and array shapes)."
             )
-    setups = [_shared_setup(filter, fm, t, observed, first_step) if shared else None for t, fm in pairs]
+    setups = [_shared_setup(filter, fm, t, observed, first_step, prep.components[1]) if shared else None
+              for t, fm in pairs]
 
     mesh = Mesh(np.asarray(jax.devices()[:1]), (run_axis,)) if mesh is None else mesh
     check_mesh(mesh, (sweep_axis, run_axis))
@@ -619,79 +644,15 @@ def monte_carlo_sweep(
     stacked = eqx.combine(
         jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *(eqx.partition(v, eqx.is_array)[0] for v in per_value)),
         static)
-    n = pairs[0][0].state_dim
+    n = prep.num_scored
     sums = run_blocks(
-        _block_delta, _zero_sums(prep.num_steps, n, prep.filter_model.initial_cov.dtype, (padded,)),
-        common=_Common(filter, observed, first_step, prep.detection, prep.run_mask), value=stacked, key=key,
+        _block_delta, _zero_sums(prep.num_steps, n, pairs[0][0].initial_cov.dtype, (padded,), prep.num_modes),
+        common=_Common(filter, observed, first_step, prep.detection, prep.run_mask, prep.components), value=stacked,
+        key=key,
         num_runs=num_runs,
         block=block, mesh=mesh, run_axis=run_axis, sweep_axis=sweep_axis, chunk_size=chunk_size,
         progress=progress, desc="Monte Carlo sweep")
     return [
-        _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), n, confidence, shared)
+        _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), n, confidence, shared, prep.components[1])
         for j in range(num_values)
     ]
-
-
-# How far above their upper bounds the ANEES or mean NIS of a reduced-precision Monte Carlo must be
-# before the result is flagged as a likely float32 failure (see MonteCarloResult.precision_warning).
-PRECISION_MARGIN = 10.0
-
-
-def _precision_suspect(dtype, anees, anees_hi, nis, nis_hi) -> bool:
-    """True when a < float64 result's ANEES or mean NIS is above PRECISION_MARGIN × its bound."""
-    if np.dtype(dtype).itemsize >= 8:
-        return False
-    mean_nis, mean_nis_hi = float(np.mean(nis)), float(np.mean(nis_hi))
-    return bool(float(anees) > PRECISION_MARGIN * float(anees_hi)
-                or (mean_nis_hi > 0 and mean_nis > PRECISION_MARGIN * mean_nis_hi))
-
-
-def _summarize(sums: _Sums, n, confidence, shared=False) -> MonteCarloResult:
-    num_ok = int(sums.num_ok)
-    num_failed = int(sums.num_failed)
-    if num_failed:
-        warnings.warn(
-            f"jaxtrack.monte_carlo: {num_failed} of {num_ok + num_failed} runs produced a "
-            f"non-finite estimate and were left out of the statistics.",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-    if num_ok == 0:
-        raise FloatingPointError("jaxtrack.monte_carlo: every run produced a non-finite estimate.")
-    mean_nees = sums.nees / num_ok
-    nees_var = jnp.maximum(sums.nees_sq / num_ok - mean_nees**2, 0.0)
-    # Run i's NIS at step k is χ²(d_ik) (its observed components); the runs are independent, so
-    # the sum over runs is χ²(D_k), D_k = Σ_i d_ik, and the run average lies in
-    # [χ²_{D_k}⁻¹(α/2), χ²_{D_k}⁻¹(1 − α/2)] / M: chi2_mean_bounds of D_k for one "run", over M.
-    # With one schedule for all runs D_k = M·d_k and this is chi2_mean_bounds(d_k, M) exactly.
-    nis_dof = sums.nis_dof / num_ok
-    nees_b = chi2_mean_bounds(np.full(mean_nees.shape, n), num_ok, confidence)
-    nis_b = chi2_mean_bounds(np.asarray(sums.nis_dof), 1, confidence) / num_ok
-    anees = jnp.mean(mean_nees) / n
-    suspect = _precision_suspect(sums.nees.dtype, anees, nees_b[0][1] / n, sums.nis / num_ok, nis_b[:, 1])
-    if suspect:
-        warnings.warn(
-            f"jaxtrack.monte_carlo: ANEES {float(anees):.3g} (upper bound {float(nees_b[0][1] / n):.3g}) or mean "
-            f"NIS far outside their bounds in {np.dtype(sums.nees.dtype).name}: float32 round-off in the "
-            "covariances is a likely cause; rerun in float64 (unset JAXTRACK_ENABLE_X64) to tell it from "
-            "a mismodelled filter.",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-    return MonteCarloResult(
-        mse=sums.squared_error / num_ok,
-        mean_error=sums.error / num_ok,
-        nees=mean_nees,
-        nees_std=jnp.sqrt(nees_var * num_ok / max(num_ok - 1, 1)),
-        nees_bounds=jnp.asarray(nees_b),
-        nis=sums.nis / num_ok,
-        nis_dof=nis_dof,
-        nis_bounds=jnp.asarray(nis_b),
-        anees=anees,
-        anees_bounds=jnp.asarray(nees_b[0] / n),
-        num_runs=num_ok,
-        num_failed=num_failed,
-        confidence=confidence,
-        shared_covariance=shared,
-        precision_warning=suspect,
-    )

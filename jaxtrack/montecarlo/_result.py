@@ -1,0 +1,175 @@
+"""What a Monte Carlo run returns: the streamed per-step sums and their summary statistics.
+
+:class:`_Sums` is what every block of runs adds to (per-step sums over runs, nothing per run);
+:func:`_summarize` turns the totals into a :class:`MonteCarloResult` with χ² bounds
+(:func:`~jaxtrack.montecarlo.chi2_mean_bounds`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ._metrics import chi2_mean_bounds
+
+
+class _Sums(NamedTuple):
+    """Per-step sums over the runs seen so far (all float64 under the default precision)."""
+
+    error: Array  # (T, n): Σ (x − x̂)
+    squared_error: Array  # (T, n): Σ (x − x̂)²
+    nees: Array  # (T,): Σ NEES
+    nees_sq: Array  # (T,): Σ NEES², for the empirical spread
+    nis: Array  # (T,): Σ NIS
+    num_ok: Array  # (): runs that stayed finite
+    num_failed: Array  # (): runs that produced a non-finite value (excluded from the sums)
+    nis_dof: Array  # (T,): Σ observed measurement components (NIS degrees of freedom) over the runs
+    mode_probs: Array  # (T, K): Σ mode probabilities (an IMM's K modes; K = 0 for one filter)
+
+
+class MonteCarloResult(eqx.Module):
+    """Statistics of a Monte Carlo run of ``num_runs`` runs over ``T`` steps.
+
+    **Fields:**
+
+    - ``mse`` ``(T, n)``: mean squared error of each state component at each step.
+    - ``mean_error`` ``(T, n)``: mean of ``x − x̂`` (the bias; 0 for a linear filter).
+    - ``nees`` ``(T,)``: NEES averaged over runs; ``nees_bounds`` ``(T, 2)`` its two-sided bounds.
+    - ``nees_std`` ``(T,)``: the empirical standard deviation of NEES over runs.
+    - ``nis`` ``(T,)``: NIS averaged over runs; ``nis_dof`` ``(T,)`` its degrees of freedom (the
+      measurement components observed, averaged over the runs: with per-run detections or
+      masks, a run's NIS at step ``k`` is χ²(d_ik) with ``d_ik`` its own observed components);
+      ``nis_bounds`` ``(T, 2)``: the bounds of the run average, from χ²(Σ_i d_ik) / M (a sum of
+      independent χ²(d_i) is χ²(Σ d_i)); ``[0, 0]`` at steps no run observed.
+    - ``anees`` ``()``: NEES averaged over runs and steps and divided by ``n`` (1 when
+      consistent). ``anees_bounds`` ``(2,)``: the per-step χ²(M·n)/(M·n) bounds. Averaging over
+      steps cannot increase the variance of the per-step average (steps are positively
+      correlated at worst completely), so these bounds are valid and conservative for ``anees``.
+    - ``num_runs``: runs that contributed; ``num_failed``: runs excluded because the filter
+      produced a non-finite value (a warning is issued when this is not 0).
+    - ``confidence``: the probability content of the bounds (default 0.95).
+    - ``shared_covariance``: True when the filter's covariances were computed once for all runs
+      (see :func:`monte_carlo`), False when every run carried its own.
+    - ``precision_warning``: True when the statistics were accumulated in a floating type
+      narrower than float64 and the ANEES or the mean NIS exceed ``PRECISION_MARGIN`` (10) times
+      their upper bounds (a ``RuntimeWarning`` naming float32 is issued too). A mismodelled
+      filter rarely exceeds its bound by more than a few times; float32 round-off of a
+      near-singular covariance (long runs, tiny process noise, large states) gives 10²–10⁵.
+      Float64 results never set it: there such a ratio is a modelling error, not round-off.
+    - ``mode_probs`` ``(T, K)``: for an :class:`~jaxtrack.filters.InteractingMultipleModel`
+      filter, its ``K`` mode probabilities ``μ_j(k)`` averaged over runs; None for one filter.
+    - ``components``: the filter state components scored (``filter_components`` of
+      :func:`monte_carlo`), in the order of ``mse``'s columns; None when the whole state is.
+    """
+
+    mse: Float[Array, "T n"]
+    mean_error: Float[Array, "T n"]
+    nees: Float[Array, " T"]
+    nees_std: Float[Array, " T"]
+    nees_bounds: Float[Array, "T 2"]
+    nis: Float[Array, " T"]
+    nis_dof: Float[Array, " T"]
+    nis_bounds: Float[Array, "T 2"]
+    anees: Float[Array, ""]
+    anees_bounds: Float[Array, " 2"]
+    num_runs: int = eqx.field(static=True)
+    num_failed: int = eqx.field(static=True)
+    confidence: float = eqx.field(static=True)
+    shared_covariance: bool = eqx.field(static=True, default=False)
+    precision_warning: bool = eqx.field(static=True, default=False)
+    mode_probs: Float[Array, "T K"] | None = None
+    components: tuple[int, ...] | None = eqx.field(static=True, default=None)
+
+    def rmse(self, components: tuple[int, ...] | None = None) -> Float[Array, " T"]:
+        """Root of the summed mean squared error over ``components`` (all states if None).
+
+        For a 2-D constant-velocity state ``[x, y, vx, vy]``, ``rmse((0, 1))`` is the position RMSE.
+        ``components`` index the columns of ``mse`` (the scored components, in their order).
+        """
+        mse = self.mse if components is None else self.mse[:, jnp.asarray(components)]
+        return jnp.sqrt(jnp.sum(mse, axis=-1))
+
+    def fraction_nees_inside(self) -> Float[Array, ""]:
+        """Fraction of steps whose run-averaged NEES lies within its bounds (≈ confidence)."""
+        inside = (self.nees >= self.nees_bounds[:, 0]) & (self.nees <= self.nees_bounds[:, 1])
+        return jnp.mean(inside)
+
+
+def _zero_sums(num_steps, n, dtype, lead=(), num_modes=0):
+    z = lambda *shape: jnp.zeros(lead + shape, dtype)  # noqa: E731
+    return _Sums(z(num_steps, n), z(num_steps, n), z(num_steps), z(num_steps), z(num_steps), z(), z(), z(num_steps),
+                 z(num_steps, num_modes))
+
+
+
+
+# How far above their upper bounds the ANEES or mean NIS of a reduced-precision Monte Carlo must be
+# before the result is flagged as a likely float32 failure (see MonteCarloResult.precision_warning).
+PRECISION_MARGIN = 10.0
+
+
+def _precision_suspect(dtype, anees, anees_hi, nis, nis_hi) -> bool:
+    """True when a < float64 result's ANEES or mean NIS is above PRECISION_MARGIN × its bound."""
+    if np.dtype(dtype).itemsize >= 8:
+        return False
+    mean_nis, mean_nis_hi = float(np.mean(nis)), float(np.mean(nis_hi))
+    return bool(float(anees) > PRECISION_MARGIN * float(anees_hi)
+                or (mean_nis_hi > 0 and mean_nis > PRECISION_MARGIN * mean_nis_hi))
+
+
+def _summarize(sums: _Sums, n, confidence, shared=False, components=None) -> MonteCarloResult:
+    num_ok = int(sums.num_ok)
+    num_failed = int(sums.num_failed)
+    if num_failed:
+        warnings.warn(
+            f"jaxtrack.monte_carlo: {num_failed} of {num_ok + num_failed} runs produced a "
+            f"non-finite estimate and were left out of the statistics.",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    if num_ok == 0:
+        raise FloatingPointError("jaxtrack.monte_carlo: every run produced a non-finite estimate.")
+    mean_nees = sums.nees / num_ok
+    nees_var = jnp.maximum(sums.nees_sq / num_ok - mean_nees**2, 0.0)
+    # Run i's NIS at step k is χ²(d_ik) (its observed components); the runs are independent, so
+    # the sum over runs is χ²(D_k), D_k = Σ_i d_ik, and the run average lies in
+    # [χ²_{D_k}⁻¹(α/2), χ²_{D_k}⁻¹(1 − α/2)] / M: chi2_mean_bounds of D_k for one "run", over M.
+    # With one schedule for all runs D_k = M·d_k and this is chi2_mean_bounds(d_k, M) exactly.
+    nis_dof = sums.nis_dof / num_ok
+    nees_b = chi2_mean_bounds(np.full(mean_nees.shape, n), num_ok, confidence)
+    nis_b = chi2_mean_bounds(np.asarray(sums.nis_dof), 1, confidence) / num_ok
+    anees = jnp.mean(mean_nees) / n
+    suspect = _precision_suspect(sums.nees.dtype, anees, nees_b[0][1] / n, sums.nis / num_ok, nis_b[:, 1])
+    if suspect:
+        warnings.warn(
+            f"jaxtrack.monte_carlo: ANEES {float(anees):.3g} (upper bound {float(nees_b[0][1] / n):.3g}) or mean "
+            f"NIS far outside their bounds in {np.dtype(sums.nees.dtype).name}: float32 round-off in the "
+            "covariances is a likely cause; rerun in float64 (unset JAXTRACK_ENABLE_X64) to tell it from "
+            "a mismodelled filter.",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return MonteCarloResult(
+        mse=sums.squared_error / num_ok,
+        mean_error=sums.error / num_ok,
+        nees=mean_nees,
+        nees_std=jnp.sqrt(nees_var * num_ok / max(num_ok - 1, 1)),
+        nees_bounds=jnp.asarray(nees_b),
+        nis=sums.nis / num_ok,
+        nis_dof=nis_dof,
+        nis_bounds=jnp.asarray(nis_b),
+        anees=anees,
+        anees_bounds=jnp.asarray(nees_b[0] / n),
+        num_runs=num_ok,
+        num_failed=num_failed,
+        confidence=confidence,
+        shared_covariance=shared,
+        precision_warning=suspect,
+        mode_probs=sums.mode_probs / num_ok if sums.mode_probs.shape[-1] else None,
+        components=components,
+    )
