@@ -4,8 +4,11 @@ on one device or sharded over devices and hosts."""
 from ._cep import circular_error_probable as circular_error_probable
 from ._engine import monte_carlo_map as monte_carlo_map
 from ._metrics import (
+    Interval as Interval,
     chi2_mean_bounds as chi2_mean_bounds,
     normalized_squared_error as normalized_squared_error,
+    time_averaged_rmse as time_averaged_rmse,
+    time_averaged_rmse_ratio as time_averaged_rmse_ratio,
 )
 from ._run import (
     MonteCarloResult as MonteCarloResult,
