@@ -13,6 +13,7 @@ from . import models as models  # noqa: E402
 from . import montecarlo as montecarlo  # noqa: E402
 from . import covariance as covariance  # noqa: E402
 from . import sensitivity as sensitivity  # noqa: E402
+from . import learning as learning  # noqa: E402
 from ._validation import InputError as InputError  # noqa: E402
 
 __version__ = "0.1.0"
