@@ -78,3 +78,44 @@ def _log_axis(ax):
         axis.set_major_formatter(ScalarFormatter())
         axis.set_minor_formatter(ScalarFormatter())
     ax.grid(True, which="both", alpha=0.3)
+
+
+def plot_mode_probabilities(
+    mode_probs: dict[str, np.ndarray],
+    mode_names: Sequence[str],
+    *,
+    times: np.ndarray | None = None,
+    time_unit: str = "s",
+    shade: np.ndarray | None = None,
+    shade_label: str = "maneuver",
+):
+    """Mode probabilities over time, one panel per mode, one line per source.
+
+    **Arguments:**
+
+    - ``mode_probs``: label → ``(T, K)`` probabilities (e.g. an IMM Monte Carlo's
+      :attr:`~jaxtrack.montecarlo.MonteCarloResult.mode_probs`, a smoother's average).
+    - ``mode_names``: the ``K`` mode names, panel titles.
+    - ``times``: ``(T,)`` time axis (default: step index); ``time_unit`` its label.
+    - ``shade``: optional boolean ``(T,)``: steps shaded grey (e.g. where the truth turns),
+      named ``shade_label`` in the legend.
+
+    **Returns:** the matplotlib ``Figure``.
+    """
+    first = np.asarray(next(iter(mode_probs.values())))
+    T, K = first.shape
+    if len(mode_names) != K:
+        raise ValueError(f"`mode_names` has {len(mode_names)} names for {K} modes.")
+    t = np.arange(T) if times is None else np.asarray(times)
+    fig, axes = plt.subplots(1, K, figsize=(4.6 * K, 3.4), constrained_layout=True, squeeze=False)
+    for k, ax in enumerate(axes[0]):
+        if shade is not None:
+            ax.fill_between(t, 0, 1, where=np.asarray(shade, bool), color="0.88", step="mid", label=shade_label)
+        for label, mu in mode_probs.items():
+            ax.plot(t, np.asarray(mu)[:, k], label=label)
+        ax.set_ylim(0, 1)
+        ax.set_title(f"P(mode = {mode_names[k]})")
+        ax.set_xlabel(f"time [{time_unit}]" if times is not None else "step")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+    return fig

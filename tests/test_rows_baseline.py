@@ -40,7 +40,7 @@ def _rows(study):
     return importlib.import_module(STUDIES[study][0]).paper_rows()
 
 
-@pytest.mark.parametrize("study", list(STUDIES))
+@pytest.mark.parametrize("study", [s for s in STUDIES if s in BASELINE])  # new studies have no c1ffaca rows
 def test_rows_equal_c1ffaca(study):
     base = BASELINE[study]
     rows = _rows(study)

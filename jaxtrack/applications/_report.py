@@ -21,6 +21,9 @@ class PaperRow:
     - ``value``: jaxtrack's value.
     - ``rtol``: the relative tolerance: the spec's tolerance, or half a unit in the paper's last
       printed digit when that is coarser (a 2-digit percentage cannot agree to 5e-3).
+    - ``bound``: ``"close"`` (default: ``|value − paper| ≤ rtol·|paper|``), or for a study's own
+      stated claim ``"at_most"`` (``value ≤ paper``) / ``"at_least"`` (``value ≥ paper``); ``paper``
+      is then the claimed bound and ``rtol`` is not used.
     """
 
     id: str
@@ -28,14 +31,28 @@ class PaperRow:
     paper: float
     value: float
     rtol: float
+    bound: str = "close"
+
+    def __post_init__(self):
+        if self.bound not in ("close", "at_most", "at_least"):
+            raise ValueError(f"`bound` must be 'close', 'at_most' or 'at_least'; got {self.bound!r}.")
 
     @property
     def ok(self) -> bool:
-        return bool(math.isfinite(self.value) and abs(self.value - self.paper) <= self.rtol * abs(self.paper))
+        if not math.isfinite(self.value):
+            return False
+        if self.bound == "at_most":
+            return bool(self.value <= self.paper)
+        if self.bound == "at_least":
+            return bool(self.value >= self.paper)
+        return bool(abs(self.value - self.paper) <= self.rtol * abs(self.paper))
 
     def as_dict(self) -> dict:
-        return {"id": self.id, "quantity": self.quantity, "paper": self.paper, "value": self.value,
-                "rtol": self.rtol, "ok": self.ok}
+        out = {"id": self.id, "quantity": self.quantity, "paper": self.paper, "value": self.value,
+               "rtol": self.rtol, "ok": self.ok}
+        if self.bound != "close":
+            out["bound"] = self.bound
+        return out
 
 
 def printed_rtol(paper: float, last_digit: float, floor: float = 5e-3) -> float:
@@ -63,8 +80,9 @@ def format_rows(rows: list[PaperRow], title: str) -> str:
     head = f"{'id':<5} {'quantity':<72} {'paper':>11} {'jaxtrack':>12} {'rtol':>7}  ok"
     lines = [title, head, "-" * len(head)]
     for r in rows:
+        tol = {"at_most": "≤ paper", "at_least": "≥ paper"}.get(r.bound, f"{r.rtol:.1e}")
         lines.append(
-            f"{r.id:<5} {r.quantity[:72]:<72} {r.paper:>11.6g} {r.value:>12.6g} {r.rtol:>7.1e}  "
+            f"{r.id:<5} {r.quantity[:72]:<72} {r.paper:>11.6g} {r.value:>12.6g} {tol:>7}  "
             f"{'yes' if r.ok else 'NO'}"
         )
     passed = sum(r.ok for r in rows)

@@ -17,6 +17,8 @@ STUDIES = {
     "sar": ("jaxtrack.applications.sar_navigation", "Layne & Blasch 1997, SAR + INS targeting (specs/sar-navigation.md)"),
     "registration": ("jaxtrack.applications.obem_registration", "Mobile radar registration, AAM vs OBEM (specs/obem-registration.md)"),
     "tma": ("jaxtrack.applications.bearings_tma", "Lindgren & Gong 1977, bearings-only TMA (specs/bearings-tma.md)"),
+    "maneuvering": ("jaxtrack.applications.maneuvering",
+                    "Maneuvering target: CV, CT and IMM filters, IMM smoother, learned IMM (own scenario; claims with margins)"),
 }
 
 
@@ -30,6 +32,8 @@ NEEDS_FLOAT64 = {
     "registration": "the site difference of two geodetic positions cancels to 1e-7 of Earth's radius",
     "tma": "the pseudo-linear bearings-only filter's normalized covariance becomes indefinite in "
            "float32 (specs/bearings-tma.md §3.5 item 6)",
+    "maneuvering": "its claims are calibrated in float64; the gradient fit of the IMM's parameters "
+                   "differences log-likelihoods of order 1e3 nats (not measured in float32)",
 }
 
 
