@@ -357,3 +357,14 @@ def test_input_errors():
     with pytest.raises(InputError, match="first_step"):
         run_imm(InteractingMultipleModel([(kf, m)], [[1.0]]), np.zeros((3, 2)), first_step="x")
     copy.deepcopy(m)  # models stay usable
+
+
+def test_float32_logits_build_and_row_check_follows_the_dtype():
+    """from_logits with float32 logits (softmax rows sum to 1 ± 3e-8) builds; a float64 matrix
+    whose rows are off by 1e-6 is still refused."""
+    members = [(KalmanFilter(), _cv_model(0.1)), (KalmanFilter(), _cv_model(4.0))]
+    logits = jnp.asarray(np.log([[0.95, 0.05], [0.1, 0.9]]), jnp.float32) + jnp.float32(0.3)
+    imm = InteractingMultipleModel.from_logits(members, logits)
+    np.testing.assert_allclose(np.asarray(imm.transition_probs), [[0.95, 0.05], [0.1, 0.9]], atol=1e-6)
+    with pytest.raises(InputError, match="rows must sum to 1"):
+        InteractingMultipleModel(members, np.array([[0.95, 0.05 + 1e-6], [0.1, 0.9]]))
