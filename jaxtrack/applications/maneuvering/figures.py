@@ -83,11 +83,13 @@ def figure_scenario(study: ManeuveringStudy | None = None):
     return fig
 
 
-def figure_learning(study: ManeuveringStudy):
-    """The learned IMM's training log-likelihood per iteration."""
+def figure_learning(source):
+    """The learned IMM's training log-likelihood per iteration (``source``: an
+    :class:`~jaxtrack.learning.IMMFit`, or a :class:`ManeuveringStudy` holding one)."""
     import matplotlib.pyplot as plt
 
-    ll = np.asarray(study.fit.log_likelihood_history)
+    fit = source.fit if isinstance(source, ManeuveringStudy) else source
+    ll = np.asarray(fit.log_likelihood_history)
     fig, ax = plt.subplots(figsize=(5.5, 3.5), constrained_layout=True)
     ax.plot(np.arange(ll.shape[0]), ll)
     ax.set_xlabel("optimiser step (Adam)")
