@@ -352,8 +352,6 @@ def test_input_errors():
         InteractingMultipleModel([(kf, m), (kf, m)], PTRANS, [0.5, 0.6])
     with pytest.raises(InputError, match="members"):
         InteractingMultipleModel([], np.zeros((0, 0)))
-    with pytest.raises(InputError, match="square-root"):
-        InteractingMultipleModel([(SquareRootKalmanFilter(), m), (kf, m)], PTRANS)
     with pytest.raises(InputError, match="first_step"):
         run_imm(InteractingMultipleModel([(kf, m)], [[1.0]]), np.zeros((3, 2)), first_step="x")
     copy.deepcopy(m)  # models stay usable
@@ -368,3 +366,30 @@ def test_float32_logits_build_and_row_check_follows_the_dtype():
     np.testing.assert_allclose(np.asarray(imm.transition_probs), [[0.95, 0.05], [0.1, 0.9]], atol=1e-6)
     with pytest.raises(InputError, match="rows must sum to 1"):
         InteractingMultipleModel(members, np.array([[0.95, 0.05 + 1e-6], [0.1, 0.9]]))
+
+
+def test_square_root_members_equal_covariance_members(linear_data, rb_data):
+    """Square-root members (factors in predict/update, mixing in covariance form) equal the
+    covariance-form members: SR-KF vs KF (linear, 200 steps) to 1e-9, SR-UKF vs UKF (range-bearing,
+    CT ±0.08) to 1e-8; the IMM smoother with SR-KF members equals the KF-member smoother."""
+    from jaxtrack.filters import SquareRootUnscentedKalmanFilter, UnscentedKalmanFilter, imm_smoother
+
+    models = [_cv_model(0.01), _cv_model(4.0)]
+    a = InteractingMultipleModel([(KalmanFilter(), m) for m in models], PTRANS)
+    b = InteractingMultipleModel([(SquareRootKalmanFilter(), models[0]), (KalmanFilter(), models[1])], PTRANS)
+    ra, rb = run_imm(a, linear_data), run_imm(b, linear_data)
+    np.testing.assert_allclose(rb.mean, ra.mean, rtol=0, atol=1e-9 * np.abs(ra.mean).max())
+    np.testing.assert_allclose(rb.cov, ra.cov, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(rb.mode_probs, ra.mode_probs, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(rb.log_likelihood, ra.log_likelihood, rtol=1e-11)
+    sa, sb = imm_smoother(a, linear_data), imm_smoother(b, linear_data)
+    np.testing.assert_allclose(sb.smoothed_mean, sa.smoothed_mean, rtol=0, atol=1e-9 * np.abs(sa.smoothed_mean).max())
+    np.testing.assert_allclose(sb.smoothed_mode_probs, sa.smoothed_mode_probs, rtol=0, atol=1e-9)
+
+    sensor = RangeBearing(RB_STD, sensor_position=SENSOR)
+    ct = [TrackingModel(CoordinatedTurn(w, TAU, 0.05), sensor, X0, P0) for w in (0.08, -0.08)]
+    u = InteractingMultipleModel([(UnscentedKalmanFilter(), m) for m in ct], PTRANS)
+    v = InteractingMultipleModel([(SquareRootUnscentedKalmanFilter(), m) for m in ct], PTRANS)
+    ru, rv = run_imm(u, rb_data), run_imm(v, rb_data)
+    np.testing.assert_allclose(rv.mean, ru.mean, rtol=0, atol=1e-8 * np.abs(ru.mean).max())
+    np.testing.assert_allclose(rv.mode_probs, ru.mode_probs, rtol=0, atol=1e-8)

@@ -29,9 +29,14 @@ moments (the *projection*). The defaults ``augment_mean = 0``, ``augment_var = 0
 target is a CT target with turn rate exactly 0 — the usual choice for CV + CT (e.g. Granström,
 Willett & Bar-Shalom 2015 discuss alternatives; pass your own to use them).
 
-Square-root members (:class:`~jaxtrack.filters.SquareRootKalmanFilter`, …) are refused: their
-state is a Cholesky factor, and the mixed covariance (a weighted sum plus the spread of the
-means) has no cheap factor update here; use the covariance form of the same filter.
+Square-root members (:class:`~jaxtrack.filters.SquareRootKalmanFilter`,
+:class:`~jaxtrack.filters.SquareRootUnscentedKalmanFilter`) run their predict and update on
+Cholesky factors; the interaction and the combination are moment matching, a weighted sum of
+covariances plus the spread of the means, which has no factor form of the same cost. So the IMM
+keeps every member's covariance, factors the mixed covariance ``P⁰_j`` once per step
+(``cholesky``) before the member's predict, and squares the updated factor after its update.
+The member's own recursion keeps the square-root filter's numerics; the mixing is in covariance
+form, as in the covariance-form IMM.
 """
 
 from __future__ import annotations
@@ -46,7 +51,8 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, check_finite, check_shape, is_concrete
 from ..models import AbstractStateSpaceModel
-from ._base import AbstractFilter, FirstStep, prepare_measurements
+from ._base import AbstractFilter, FirstStep, _outer_factor, prepare_measurements
+from ._linalg import cholesky
 from ._updates import symmetrize
 
 
@@ -63,6 +69,16 @@ def _embed_cov(P: Array, var: Array) -> Array:
         return P
     out = jnp.zeros((N, N), P.dtype).at[:n, :n].set(P)
     return out.at[n:, n:].set(jnp.diag(var[n:].astype(P.dtype)))
+
+
+def _native_cov(f: AbstractFilter, P: Array) -> Array:
+    """A covariance in the form member ``f`` carries: its Cholesky factor for a square-root filter."""
+    return cholesky(P) if f.square_root else P
+
+
+def _covariance(f: AbstractFilter, C: Array) -> Array:
+    """Member ``f``'s carried covariance form ``C`` as a covariance (``C Cᵀ`` for a factor)."""
+    return _outer_factor(C) if f.square_root else C
 
 
 def _moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:
@@ -124,11 +140,12 @@ class InteractingMultipleModel(eqx.Module):
 
     **Arguments:**
 
-    - ``members``: a sequence of ``(filter, model)`` pairs, ``M ≥ 1``: any non-square-root
-      jaxtrack filter (:class:`~jaxtrack.filters.KalmanFilter`,
+    - ``members``: a sequence of ``(filter, model)`` pairs, ``M ≥ 1``: any jaxtrack filter
+      (:class:`~jaxtrack.filters.KalmanFilter`,
       :class:`~jaxtrack.filters.ExtendedKalmanFilter`,
       :class:`~jaxtrack.filters.UnscentedKalmanFilter`,
-      :class:`~jaxtrack.filters.IteratedExtendedKalmanFilter`, …) with its
+      :class:`~jaxtrack.filters.IteratedExtendedKalmanFilter`, the square-root filters (module
+      docstring), …) with its
       :class:`~jaxtrack.models.AbstractStateSpaceModel`. All models share the measurement
       dimension; each model's prior is its member's state before the first step.
     - ``transition_probs``: the Markov mode-transition matrix ``p_ij`` ``(M, M)``, row ``i`` the
@@ -141,8 +158,8 @@ class InteractingMultipleModel(eqx.Module):
       mean and variance given to the components a smaller member lacks (module docstring;
       default 0 and 0).
 
-    **Raises:** ``InputError`` naming the argument: not a (filter, model) pair, a square-root
-    filter, different measurement dimensions, a state that is not the prefix-compatible size,
+    **Raises:** ``InputError`` naming the argument: not a (filter, model) pair, different
+    measurement dimensions, a state that is not the prefix-compatible size,
     ``transition_probs`` not ``(M, M)``, negative, or (when concrete) rows not summing to 1,
     ``initial_probs`` not ``(M,)`` / negative / not summing to 1.
     """
@@ -173,12 +190,6 @@ class InteractingMultipleModel(eqx.Module):
             f, m = pair
             if not isinstance(f, AbstractFilter):
                 raise InputError(f"`members[{i}]`'s filter must be a jaxtrack filter; got {type(f).__name__}.")
-            if f.square_root:
-                raise InputError(
-                    f"`members[{i}]`: square-root filter {type(f).__name__} is not supported as an "
-                    f"IMM member (its state is a Cholesky factor; mixing needs the covariance). Use "
-                    f"the covariance form of the filter."
-                )
             if not isinstance(m, AbstractStateSpaceModel):
                 raise InputError(
                     f"`members[{i}]`'s model must be a jaxtrack state-space model; got {type(m).__name__}."
@@ -319,11 +330,11 @@ class InteractingMultipleModel(eqx.Module):
             x0, P0 = _moment_match(mix[:, j], X, P)
             x0, P0 = x0[:n], P0[:n, :n]
             # 3. the member's own predict and update (eq. 11.6.6-10).
-            pm, pc = f.predict(model, x0, P0, k)
+            pm, pc = f.predict(model, x0, _native_cov(f, P0), k)
             if first_step == "update":
                 # The priors already sit at the first measurement: no mixing, no transition.
                 pm = jnp.where(at_start, state.means[j], pm)
-                pc = jnp.where(at_start, state.covs[j], pc)
+                pc = jnp.where(at_start, _native_cov(f, state.covs[j]), pc)
             posts.append(f.update(model, pm, pc, z, observed, k))
         # 4. μ_j ∝ Λ_j c̄_j in log space (eqs. 11.6.6-11 … -13).
         loglam = jnp.stack([c.log_likelihood for c in posts])
@@ -331,13 +342,14 @@ class InteractingMultipleModel(eqx.Module):
         step_ll = jax.scipy.special.logsumexp(joint)
         new_mu = jnp.exp(joint - step_ll)
         # 5. combined output (eqs. 11.6.6-14, -15).
-        Xp, Pp = self._common([c.mean for c in posts], [c.cov for c in posts])
+        post_covs = [_covariance(f, c.cov) for f, c in zip(self.filters, posts)]
+        Xp, Pp = self._common([c.mean for c in posts], post_covs)
         mean, cov = _moment_match(new_mu, Xp, Pp)
         ll = state.log_likelihood + step_ll
         finite = jnp.all(jnp.isfinite(mean)) & jnp.all(jnp.isfinite(cov)) & jnp.isfinite(ll)
         finite = finite & jnp.all(jnp.isfinite(new_mu))
         new_state = IMMState(
-            tuple(c.mean for c in posts), tuple(c.cov for c in posts), new_mu, ll, k + 1, state.ok & finite
+            tuple(c.mean for c in posts), tuple(post_covs), new_mu, ll, k + 1, state.ok & finite
         )
         return new_state, IMMStepOutput(mean, cov, new_mu, loglam, step_ll)
 

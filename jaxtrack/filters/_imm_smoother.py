@@ -67,7 +67,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._validation import InputError
 from ._base import FirstStep
-from ._imm import IMMResult, InteractingMultipleModel, _moment_match, run_imm
+from ._imm import IMMResult, InteractingMultipleModel, _covariance, _moment_match, _native_cov, run_imm
 from ._smoother import _smoother_gain
 from ._updates import symmetrize
 
@@ -129,7 +129,8 @@ def _backward_step(
         def pair(x_i, P_i, f=f, model=model, n=n, j=j):
             # (K1) member i's filtered estimate through member j's model, by j's own predict
             # (the same arithmetic as the forward pass: one member reproduces its filter).
-            pm, pc = f.predict(model, x_i[:n], P_i[:n, :n], k + 1)
+            pm, pc = f.predict(model, x_i[:n], _native_cov(f, P_i[:n, :n]), k + 1)
+            pc = _covariance(f, pc)
             F = model.transition_jacobian(x_i[:n], k + 1)
             # (K2) cross-covariance of the common state at k with member j's at k+1, C = P_i[:, :n] Φ_jᵀ;
             # G = C pc⁻¹ (pseudo-inverse when pc is singular) via _smoother_gain(I, Cᵀ, pc).
