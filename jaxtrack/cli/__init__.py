@@ -21,6 +21,10 @@ from ._args import ArgumentError, OneLineParser, check_out_dir, fail, int_in, se
 
 def _parser() -> OneLineParser:
     parser = OneLineParser(prog="jaxtrack", description=__doc__.splitlines()[0])
+    from .. import __version__
+
+    # argparse prints "jaxtrack 0.1.0" on stdout and exits 0 (main turns the SystemExit into 0).
+    parser.add_argument("--version", action="version", version=f"jaxtrack {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     from . import _design, _reproduce
 
@@ -124,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     except ArgumentError as exc:
         print(exc, file=sys.stderr)
         return 2
-    except SystemExit as exc:  # --help
+    except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else 0
     prog = f"jaxtrack {args.command}"
     if args.command == "demo" and (msg := _check_demo(args)):
