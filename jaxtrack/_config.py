@@ -14,19 +14,42 @@ follows the dtype of its inputs, so float32 works wherever the arithmetic allows
 from __future__ import annotations
 
 import os
-
-import jax
+import sys
 
 _OPT_OUT_VALUES = {"0", "false", "no", "off"}
 
 
+def _opted_out() -> bool:
+    return os.environ.get("JAXTRACK_ENABLE_X64", "1").strip().lower() in _OPT_OUT_VALUES
+
+
+def _request_x64() -> None:
+    """Ask for float64 unless the user opted out, without importing JAX.
+
+    JAX already imported: ``jax.config.update`` (cheap, the module is there). Not yet: set
+    ``JAX_ENABLE_X64=1``, which JAX reads when it is first imported, so that importing jaxtrack
+    stays free of the JAX import (the command line's ``--help`` and ``--version``).
+    """
+    if _opted_out():
+        return
+    jax = sys.modules.get("jax")
+    if jax is not None and hasattr(jax, "config"):
+        jax.config.update("jax_enable_x64", True)
+    else:
+        os.environ["JAX_ENABLE_X64"] = "1"
+
+
 def _enable_x64_by_default() -> bool:
-    """Turn on float64 unless the user opted out; returns whether it is on."""
-    if os.environ.get("JAXTRACK_ENABLE_X64", "1").strip().lower() not in _OPT_OUT_VALUES:
+    """Turn on float64 unless the user opted out (imports JAX); returns whether it is on."""
+    import jax
+
+    if not _opted_out():
         jax.config.update("jax_enable_x64", True)
     return bool(jax.config.jax_enable_x64)
 
 
 def float_dtype():
     """The default float dtype under the current JAX configuration (float64 or float32)."""
+    import jax
+
     return jax.numpy.float64 if jax.config.jax_enable_x64 else jax.numpy.float32
