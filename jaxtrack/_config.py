@@ -28,7 +28,9 @@ def _request_x64() -> None:
 
     JAX already imported: ``jax.config.update`` (cheap, the module is there). Not yet: set
     ``JAX_ENABLE_X64=1``, which JAX reads when it is first imported, so that importing jaxtrack
-    stays free of the JAX import (the command line's ``--help`` and ``--version``).
+    stays free of the JAX import (the command line's ``--help`` and ``--version``). The
+    variable is inherited by child processes: a child that should run in float32 needs
+    ``JAX_ENABLE_X64=0`` as well as ``JAXTRACK_ENABLE_X64=0``.
     """
     if _opted_out():
         return
