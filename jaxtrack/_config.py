@@ -41,15 +41,6 @@ def _request_x64() -> None:
         os.environ["JAX_ENABLE_X64"] = "1"
 
 
-def _enable_x64_by_default() -> bool:
-    """Turn on float64 unless the user opted out (imports JAX); returns whether it is on."""
-    import jax
-
-    if not _opted_out():
-        jax.config.update("jax_enable_x64", True)
-    return bool(jax.config.jax_enable_x64)
-
-
 def float_dtype():
     """The default float dtype under the current JAX configuration (float64 or float32)."""
     import jax

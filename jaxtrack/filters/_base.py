@@ -21,6 +21,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, check_shape, covariance_ok, is_concrete
 from ..models import AbstractStateSpaceModel
+from ._linalg import marginal_cov
 from ._updates import (  # noqa: F401  (re-exported: the update functions' historical home)
     AbstractUpdateForm,
     Conditioned,
@@ -154,12 +155,8 @@ class AbstractFilter(eqx.Module):
         """
         from ..montecarlo._metrics import normalized_squared_error
 
-        cov = conditioned.cov
-        if components is not None:
-            idx = np.asarray(components)
-            cov = cov[idx[:, None], idx[None, :]]
         return (
-            normalized_squared_error(error, cov),
+            normalized_squared_error(error, marginal_cov(conditioned.cov, components)),
             normalized_squared_error(conditioned.innovation, conditioned.innovation_cov),
         )
 

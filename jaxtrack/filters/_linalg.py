@@ -16,6 +16,7 @@ unbatched and only the products are batched.
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 import jax.scipy.linalg as jsl
 from jaxtyping import Array, Float
 
@@ -117,6 +118,18 @@ def tril_inverse(L: Float[Array, "d d"]) -> Float[Array, "d d"]:
         [jnp.stack([X[i][j] if j <= i else zero for j in range(d)], axis=-1) for i in range(d)],
         axis=-2,
     )
+
+
+def marginal_cov(cov: Array, components) -> Array:
+    """``cov[..., c, c]``: the covariance of the sub-state ``components`` (leading axes batch).
+
+    **Arguments:** ``cov`` ``(..., n, n)``; ``components``: None (all) or a sequence of ``d``
+    distinct indices. **Returns:** ``(..., d, d)`` (``cov`` itself for None).
+    """
+    if components is None:
+        return cov
+    idx = np.asarray(components)
+    return cov[..., idx[:, None], idx[None, :]]
 
 
 def cholesky_and_inverse(a: Float[Array, "d d"]) -> tuple[Float[Array, "d d"], Float[Array, "d d"]]:

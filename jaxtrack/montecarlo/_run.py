@@ -48,7 +48,7 @@ from ..filters._batch import (
     resolve_covariance,
     shared_covariances,
 )
-from ..filters._linalg import all_rows, cholesky_and_inverse, matmul, sum_rows
+from ..filters._linalg import all_rows, cholesky_and_inverse, marginal_cov, matmul, sum_rows
 from ..models import AbstractStateSpaceModel
 from ._metrics import normalized_squared_error
 from ._result import MonteCarloResult, _Sums, _summarize, _zero_sums
@@ -145,8 +145,8 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, c
             # An IMM has no single innovation: NIS is not scored (0, with 0 degrees of freedom).
             filt, out = filter.step(filt, z, obs, first_step=first_step)
             error = _scored(x, out.mean, components)
-            cov = out.cov if fc is None else out.cov[np.asarray(fc)[:, None], np.asarray(fc)[None, :]]
-            return filt, error, normalized_squared_error(error, cov), jnp.zeros((), error.dtype), out.mode_probs
+            nees = normalized_squared_error(error, marginal_cov(out.cov, fc))
+            return filt, error, nees, jnp.zeros((), error.dtype), out.mode_probs
         filt, (_, _, post) = filter.step(filter_model, filt, z, obs, first_step=first_step)
         error = _scored(x, post.mean, components)
         nees, nis = filter.consistency(post, error, fc)
@@ -234,11 +234,7 @@ def _shared_setup(filter, filter_model, truth, observed, first_step, filter_comp
     factors = noise_factors(truth, num_steps)
     cov = shared_covariances(filter, filter_model, observed, first_step)
     maps = mean_maps(filter, filter_model, cov.gain, first_step)
-    scored = cov.filtered_cov
-    if filter_components is not None:
-        idx = np.asarray(filter_components)
-        scored = scored[:, idx[:, None], idx[None, :]]
-    nees_factor = jax.vmap(cholesky_and_inverse)(scored)[1]
+    nees_factor = jax.vmap(cholesky_and_inverse)(marginal_cov(cov.filtered_cov, filter_components))[1]
     return factors, cov, maps, nees_factor
 
 
