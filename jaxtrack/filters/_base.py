@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from .._export import Exportable
 from .._validation import InputError, check_shape, covariance_ok, is_concrete
 from ..models import AbstractStateSpaceModel
 from ._linalg import marginal_cov
@@ -213,7 +214,7 @@ class AbstractFilter(eqx.Module):
         return new_state, StepOutput(pred_mean, pred_cov, post)
 
 
-class FilterResult(eqx.Module):
+class FilterResult(Exportable, eqx.Module):
     """Output of :func:`run_filter` for one trajectory of ``T`` steps.
 
     With ``save="final"`` the per-step histories are ``None`` and only the final state, the
@@ -236,6 +237,10 @@ class FilterResult(eqx.Module):
       ``predicted_cov_factor`` ``(T, n, n)``, ``innovation_cov_factor`` ``(T, m, m)``,
       ``final_cov_factor`` ``(n, n)``: the lower Cholesky factors the filter propagated, of which
       the covariance fields above are the products ``L Lᵀ`` (formed once, after the scan).
+
+    **Export** (:mod:`jaxtrack._export`): ``to_dict()``, ``save(path)`` / ``FilterResult.load(path)``
+    (one ``.npz``, bit for bit), ``to_xarray()`` and ``to_pandas()`` (one row per step) with the
+    optional ``export`` extra.
     """
 
     filtered_mean: Float[Array, "T n"] | None
@@ -253,6 +258,25 @@ class FilterResult(eqx.Module):
     predicted_cov_factor: Float[Array, "T n n"] | None = None
     innovation_cov_factor: Float[Array, "T m m"] | None = None
     final_cov_factor: Float[Array, "n n"] | None = None
+
+    _export_kind = "jaxtrack.FilterResult"
+    _export_dims = {
+        "filtered_mean": ("time", "state"), "filtered_cov": ("time", "state", "state_col"),
+        "predicted_mean": ("time", "state"), "predicted_cov": ("time", "state", "state_col"),
+        "innovation": ("time", "measurement"), "innovation_cov": ("time", "measurement", "measurement_col"),
+        "num_observed": ("time",), "log_likelihood": (), "final_mean": ("state",),
+        "final_cov": ("state", "state_col"), "ok": (),
+        "filtered_cov_factor": ("time", "state", "state_col"), "predicted_cov_factor": ("time", "state", "state_col"),
+        "innovation_cov_factor": ("time", "measurement", "measurement_col"), "final_cov_factor": ("state", "state_col"),
+    }
+    _export_units = {
+        "filtered_mean": "state units", "filtered_cov": "state units squared", "predicted_mean": "state units",
+        "predicted_cov": "state units squared", "innovation": "measurement units",
+        "innovation_cov": "measurement units squared", "num_observed": "components", "log_likelihood": "nats",
+        "final_mean": "state units", "final_cov": "state units squared", "filtered_cov_factor": "state units",
+        "predicted_cov_factor": "state units", "innovation_cov_factor": "measurement units",
+        "final_cov_factor": "state units",
+    }
 
 
 def _outer_factor(L: Array) -> Array:

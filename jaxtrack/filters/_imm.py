@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from .._export import Exportable
 from .._validation import InputError, check_finite, check_shape, is_concrete
 from ..models import AbstractStateSpaceModel
 from ._base import AbstractFilter, FirstStep, _outer_factor, prepare_measurements
@@ -354,13 +355,17 @@ class InteractingMultipleModel(eqx.Module):
         return new_state, IMMStepOutput(mean, cov, new_mu, loglam, step_ll)
 
 
-class IMMResult(eqx.Module):
+class IMMResult(Exportable, eqx.Module):
     """Output of :func:`run_imm` for one trajectory of ``T`` steps.
 
     **Fields:** ``mean`` ``(T, N)``, ``cov`` ``(T, N, N)``: the combined ``x̂_{k/k}``, ``P_{k/k}``;
     ``mode_probs`` ``(T, M)``; ``member_means``, ``member_covs``: tuples of ``(T, n_j)`` and
     ``(T, n_j, n_j)``; ``member_log_likelihoods`` ``(T, M)``: ``log Λ_j`` per step;
     ``log_likelihood`` ``()``: ``Σ_k log Σ_j Λ_j c̄_j``; ``ok`` ``()`` bool.
+
+    **Export** (:mod:`jaxtrack._export`): ``to_dict()``, ``save(path)`` / ``IMMResult.load(path)``
+    (one ``.npz``, bit for bit), ``to_xarray()`` and ``to_pandas()`` (one row per step) with the
+    optional ``export`` extra.
     """
 
     mean: Float[Array, "T N"]
@@ -371,6 +376,14 @@ class IMMResult(eqx.Module):
     member_log_likelihoods: Float[Array, "T M"]
     log_likelihood: Float[Array, ""]
     ok: Bool[Array, ""]
+
+    _export_kind = "jaxtrack.IMMResult"
+    _export_dims = {"mean": ("time", "state"), "cov": ("time", "state", "state_col"), "mode_probs": ("time", "mode"),
+                    "member_means": ("time", "state"), "member_covs": ("time", "state", "state_col"),
+                    "member_log_likelihoods": ("time", "mode"), "log_likelihood": (), "ok": ()}
+    _export_units = {"mean": "state units", "cov": "state units squared", "mode_probs": "probability",
+                     "member_means": "state units", "member_covs": "state units squared",
+                     "member_log_likelihoods": "nats", "log_likelihood": "nats"}
 
 
 @eqx.filter_jit

@@ -8,12 +8,13 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._export import Exportable
 from ..models import AbstractStateSpaceModel
 from ._base import AbstractFilter, FilterResult, FirstStep, run_filter, symmetrize
 from ._kalman import KalmanFilter
 
 
-class SmootherResult(eqx.Module):
+class SmootherResult(Exportable, eqx.Module):
     """Output of :func:`rts_smoother`.
 
     - ``smoothed_mean`` ``(T, n)``, ``smoothed_cov`` ``(T, n, n)``: ``x̂_{k/T-1}``, ``P_{k/T-1}``.
@@ -23,6 +24,10 @@ class SmootherResult(eqx.Module):
       or covariance is non-finite. A singular predicted covariance ``P_{k+1/k}`` (``Q = 0`` with
       a singular ``F``) is not a failure: the gain then uses its pseudo-inverse,
       ``G_k = P_{k/k} Φ_{k+1}ᵀ P_{k+1/k}⁺``, which gives the exact smoothed moments.
+
+    **Export** (:mod:`jaxtrack._export`): ``to_dict()``, ``save(path)`` / ``SmootherResult.load(path)``
+    (one ``.npz``, bit for bit), ``to_xarray()`` and ``to_pandas()`` (one row per step) with the
+    optional ``export`` extra.
     """
 
     smoothed_mean: Float[Array, "T n"]
@@ -30,6 +35,12 @@ class SmootherResult(eqx.Module):
     smoother_gain: Float[Array, "Tm1 n n"]
     filtered: FilterResult
     ok: Bool[Array, ""]
+
+    _export_kind = "jaxtrack.SmootherResult"
+    # The gains have T-1 steps, so their axis is not `time` (xarray needs one length per name).
+    _export_dims = {"smoothed_mean": ("time", "state"), "smoothed_cov": ("time", "state", "state_col"),
+                    "smoother_gain": ("gain_step", "state", "state_col"), "ok": ()}
+    _export_units = {"smoothed_mean": "state units", "smoothed_cov": "state units squared", "smoother_gain": "1"}
 
 
 _SMOOTHER_FAILED = (

@@ -7,28 +7,16 @@
 
 from __future__ import annotations
 
-import dataclasses
-import json
-import os
-import uuid
 import warnings
-import zipfile
-import zlib
-from pathlib import Path
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, UInt32
 
-from .._validation import InputError
+from .._export import Exportable
 from ._metrics import chi2_mean_bounds
-
-# Version of the ``save``/``to_dict`` layout; ``load`` refuses any other. Raise it when a field
-# changes meaning, not when one is added with a default (older files then still load).
-EXPORT_FORMAT_VERSION = 1
-_EXPORT_KIND = "jaxtrack.MonteCarloResult"
 
 
 class _Sums(NamedTuple):
@@ -45,7 +33,7 @@ class _Sums(NamedTuple):
     mode_probs: Array  # (T, K): Σ mode probabilities (an IMM's K modes; K = 0 for one filter)
 
 
-class MonteCarloResult(eqx.Module):
+class MonteCarloResult(Exportable, eqx.Module):
     """Statistics of a Monte Carlo run of ``num_runs`` runs over ``T`` steps.
 
     **Fields:**
@@ -79,8 +67,15 @@ class MonteCarloResult(eqx.Module):
     - ``components``: the filter state components scored (``filter_components`` of
       :func:`monte_carlo`), in the order of ``mse``'s columns; None when the whole state is.
 
-    **Export:** :meth:`to_dict` (NumPy arrays or JSON-ready lists), :meth:`save` to one ``.npz``
-    and :meth:`load` back, bit for bit; both carry ``format_version`` (1).
+    - ``key`` ``(k,)`` uint32: the raw words of the PRNG key the study was run with
+      (``jax.random.key_data``), and ``key_impl``: its implementation's name (e.g.
+      ``"threefry2x32"``); ``jax.random.wrap_key_data(result.key, impl=result.key_impl)`` gives
+      the key back, so a saved result says how to rerun it. None when not set by the caller.
+
+    **Export** (:mod:`jaxtrack._export`): :meth:`to_dict` (NumPy arrays or JSON-ready lists),
+    :meth:`save` to one ``.npz`` and :meth:`load` back, bit for bit (both carry
+    ``format_version`` 1), :meth:`to_xarray` (dims ``time``, ``component``, ``bound``, ``mode``)
+    and :meth:`to_pandas` (one row per step) with the optional ``export`` extra.
     """
 
     mse: Float[Array, "T n"]
@@ -100,6 +95,22 @@ class MonteCarloResult(eqx.Module):
     precision_warning: bool = eqx.field(static=True, default=False)
     mode_probs: Float[Array, "T K"] | None = None
     components: tuple[int, ...] | None = eqx.field(static=True, default=None)
+    key: UInt32[Array, " k"] | None = None
+    key_impl: str | None = eqx.field(static=True, default=None)
+
+    _export_kind = "jaxtrack.MonteCarloResult"
+    _export_dims = {
+        "mse": ("time", "component"), "mean_error": ("time", "component"), "nees": ("time",),
+        "nees_std": ("time",), "nees_bounds": ("time", "bound"), "nis": ("time",), "nis_dof": ("time",),
+        "nis_bounds": ("time", "bound"), "anees": (), "anees_bounds": ("bound",),
+        "mode_probs": ("time", "mode"), "key": ("key_word",),
+    }
+    _export_units = {
+        "mse": "state units squared", "mean_error": "state units", "nees": "1 (chi-square, n dof)",
+        "nees_std": "1", "nees_bounds": "1", "nis": "1 (chi-square, nis_dof dof)", "nis_dof": "components",
+        "nis_bounds": "1", "anees": "1 (per state component)", "anees_bounds": "1", "mode_probs": "probability",
+        "key": "raw PRNG key words (uint32)",
+    }
 
     def rmse(self, components: tuple[int, ...] | None = None) -> Float[Array, " T"]:
         """Root of the summed mean squared error over ``components`` (all states if None).
@@ -114,168 +125,6 @@ class MonteCarloResult(eqx.Module):
         """Fraction of steps whose run-averaged NEES lies within its bounds (≈ confidence)."""
         inside = (self.nees >= self.nees_bounds[:, 0]) & (self.nees <= self.nees_bounds[:, 1])
         return jnp.mean(inside)
-
-    # ---- export -----------------------------------------------------------------------------
-    # The array fields (leaves) and the static fields (metadata) are found from the dataclass
-    # fields, so a field added later is exported without touching these methods.
-
-    @classmethod
-    def _split_fields(cls) -> tuple[list[dataclasses.Field], list[dataclasses.Field]]:
-        fields = dataclasses.fields(cls)
-        static = [f for f in fields if f.metadata.get("static", False)]
-        arrays = [f for f in fields if not f.metadata.get("static", False)]
-        return arrays, static
-
-    def _meta(self) -> dict:
-        """The static fields as JSON-ready Python values, plus ``format_version`` and ``kind``."""
-        _, static = self._split_fields()
-        meta = {"format_version": EXPORT_FORMAT_VERSION, "kind": _EXPORT_KIND}
-        for f in static:
-            value = getattr(self, f.name)
-            # numpy scalars (np.int64 component indices, an np.float32 confidence) → Python ones
-            if isinstance(value, (tuple, list)):
-                value = [v.item() if isinstance(v, np.generic) else v for v in value]
-            elif isinstance(value, np.generic):
-                value = value.item()
-            meta[f.name] = value
-        return meta
-
-    def to_dict(self, arrays: Literal["numpy", "list"] = "numpy") -> dict:
-        """Everything in the result as a plain dict: per-step curves and metadata.
-
-        **Arguments:**
-
-        - ``arrays``: ``"numpy"`` (default) gives each array field as a NumPy array of its own
-          dtype and shape; ``"list"`` gives nested Python lists / floats (``ndarray.tolist()``),
-          so that ``json.dumps(result.to_dict("list"))`` works (float64 values round-trip
-          exactly through JSON's shortest repr; the dtype itself is not kept in that form).
-
-        **Returns:** a dict with
-
-        - the array fields, with their shapes (``T`` steps, ``n`` scored components, ``K``
-          modes; units are those of the state, squared for ``mse``): ``mse`` ``(T, n)``,
-          ``mean_error`` ``(T, n)``, ``nees`` / ``nees_std`` ``(T,)``, ``nees_bounds`` ``(T, 2)``,
-          ``nis`` / ``nis_dof`` ``(T,)``, ``nis_bounds`` ``(T, 2)``, ``anees`` ``()``,
-          ``anees_bounds`` ``(2,)``, ``mode_probs`` ``(T, K)`` or None (a single filter);
-          a result of :func:`monte_carlo_sweep` element has the same shapes;
-        - the metadata: ``num_runs``, ``num_failed``, ``confidence``, ``shared_covariance``,
-          ``precision_warning``, ``components`` (a list, or None), and ``format_version`` (1)
-          and ``kind`` (``"jaxtrack.MonteCarloResult"``) describing the layout.
-        """
-        if arrays not in ("numpy", "list"):
-            raise InputError(f'`arrays` must be "numpy" or "list"; got {arrays!r}.')
-        out = self._meta()
-        array_fields, _ = self._split_fields()
-        for f in array_fields:
-            value = getattr(self, f.name)
-            if value is not None:
-                value = np.asarray(value)
-                if arrays == "list":
-                    value = value.tolist()
-            out[f.name] = value
-        return out
-
-    def save(self, path: str | os.PathLike) -> Path:
-        """Write the result to one ``.npz`` file, exactly (bit for bit) restorable by :meth:`load`.
-
-        The file holds one array per array field, under the field's name (fields that are None,
-        e.g. ``mode_probs`` of a single filter, are left out), and an entry ``meta``: a JSON
-        string of the static fields with ``format_version`` and ``kind`` (see :meth:`to_dict`).
-        It is an ordinary ``np.savez`` archive (no pickled objects): ``np.load(path)`` reads it
-        without jaxtrack, e.g. ``json.loads(str(np.load(path)["meta"]))``.
-
-        **Arguments:**
-
-        - ``path``: the file to write, used as given (no ``.npz`` is appended). Written to a
-          temporary file in the same folder and renamed, so an interrupted save leaves no
-          partial file and an existing file is replaced whole.
-
-        **Returns:** ``path`` as a :class:`pathlib.Path`.
-        """
-        path = Path(path)
-        entries = {"meta": np.asarray(json.dumps(self._meta()))}
-        array_fields, _ = self._split_fields()
-        for f in array_fields:
-            value = getattr(self, f.name)
-            if value is not None:
-                entries[f.name] = np.asarray(value)
-        # A new name beside the target ("x" mode: never clobbers), created with the umask's
-        # permissions like any written file (mkstemp would make it private, 0600).
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-        try:
-            with open(tmp, "xb") as fh:
-                np.savez(fh, **entries)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
-
-    @classmethod
-    def load(cls, path: str | os.PathLike) -> MonteCarloResult:
-        """Read a result written by :meth:`save`.
-
-        **Arguments:**
-
-        - ``path``: a file written by :meth:`MonteCarloResult.save`.
-
-        **Returns:** the :class:`MonteCarloResult`, every array a ``jax.Array`` with the dtype
-        and values saved (bit for bit; a float64 file read with float64 disabled in JAX is
-        narrowed by JAX to float32), the static fields equal to the saved ones.
-
-        **Raises:** ``FileNotFoundError`` if ``path`` does not exist; :class:`~jaxtrack.InputError`
-        naming ``path`` if it is not such a file: not an ``.npz`` archive, no ``meta`` entry,
-        another ``kind``, a ``format_version`` other than 1, or missing / unknown fields.
-        """
-        def bad(why: str) -> InputError:
-            return InputError(f"`path` {str(path)!r} is not a saved MonteCarloResult: {why}.")
-
-        read_errors = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error)
-        # Open the file here (FileNotFoundError propagates): np.load given a path leaves its
-        # handle open when the archive turns out to be broken.
-        with open(path, "rb") as fh:
-            try:
-                npz = np.load(fh, allow_pickle=False)
-            except read_errors as exc:  # not an npz/npy at all, or a pickle we refuse to run
-                raise bad(f"cannot be read as an .npz archive ({exc})") from None
-            if not isinstance(npz, np.lib.npyio.NpzFile):  # a bare .npy array
-                raise bad("it holds one array, not an .npz archive")
-            with npz:
-                try:
-                    entries = {name: npz[name] for name in npz.files}
-                except read_errors as exc:
-                    raise bad(f"an entry cannot be read ({exc})") from None
-        if "meta" not in entries:
-            raise bad("it has no `meta` entry")
-        try:
-            meta = json.loads(str(entries.pop("meta")))
-        except ValueError:
-            raise bad("its `meta` entry is not JSON") from None
-        if not isinstance(meta, dict) or meta.get("kind") != _EXPORT_KIND:
-            raise bad(f"`meta.kind` is {meta.get('kind') if isinstance(meta, dict) else None!r}, "
-                      f"expected {_EXPORT_KIND!r}")
-        version = meta.pop("format_version", None)
-        if version != EXPORT_FORMAT_VERSION:
-            raise bad(f"format_version {version!r}; this jaxtrack reads format_version {EXPORT_FORMAT_VERSION}")
-        meta.pop("kind")
-        array_fields, static_fields = cls._split_fields()
-        known_arrays = {f.name for f in array_fields}
-        known_static = {f.name for f in static_fields}
-        if unknown := sorted(set(entries) - known_arrays) + sorted(set(meta) - known_static):
-            raise bad(f"unknown fields {unknown}")
-        kwargs = {}
-        for f in array_fields:
-            if f.name in entries:
-                kwargs[f.name] = jnp.asarray(entries[f.name])
-            elif f.default is dataclasses.MISSING:  # a required array is absent (None ones are left out)
-                raise bad(f"the array `{f.name}` is missing")
-        for f in static_fields:
-            if f.name in meta:
-                value = meta[f.name]
-                kwargs[f.name] = tuple(value) if isinstance(value, list) else value  # JSON has no tuples
-            elif f.default is dataclasses.MISSING:
-                raise bad(f"`meta.{f.name}` is missing")
-        return cls(**kwargs)
 
 
 def _zero_sums(num_steps, n, dtype, lead=(), num_modes=0):
@@ -300,7 +149,7 @@ def _precision_suspect(dtype, anees, anees_hi, nis, nis_hi) -> bool:
                 or (mean_nis_hi > 0 and mean_nis > PRECISION_MARGIN * mean_nis_hi))
 
 
-def _summarize(sums: _Sums, n, confidence, shared=False, components=None) -> MonteCarloResult:
+def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=None, key_impl=None) -> MonteCarloResult:
     num_ok = int(sums.num_ok)
     num_failed = int(sums.num_failed)
     if num_failed:
@@ -350,4 +199,16 @@ def _summarize(sums: _Sums, n, confidence, shared=False, components=None) -> Mon
         precision_warning=suspect,
         mode_probs=sums.mode_probs / num_ok if sums.mode_probs.shape[-1] else None,
         components=components,
+        key=key,
+        key_impl=key_impl,
     )
+
+
+def _key_fields(key) -> dict:
+    """``key`` and ``key_impl`` of a :class:`MonteCarloResult` for the study's PRNG key: a typed
+    key (``jax.random.key``) or a raw uint32 one (``jax.random.PRNGKey``)."""
+    import jax
+
+    if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return {"key": jax.random.key_data(key), "key_impl": str(jax.random.key_impl(key))}
+    return {"key": jnp.asarray(key), "key_impl": str(jax.config.jax_default_prng_impl)}

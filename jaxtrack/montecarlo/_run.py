@@ -51,7 +51,7 @@ from ..filters._batch import (
 from ..filters._linalg import all_rows, cholesky_and_inverse, marginal_cov, matmul, sum_rows
 from ..models import AbstractStateSpaceModel
 from ._metrics import normalized_squared_error
-from ._result import MonteCarloResult, _Sums, _summarize, _zero_sums
+from ._result import MonteCarloResult, _key_fields, _Sums, _summarize, _zero_sums
 from ._noise import key_words, step_normals
 from ._engine import block_size_for, check_mesh, run_blocks
 from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
@@ -549,7 +549,7 @@ def monte_carlo(
         value=_Models(truth, filter_model, setup), key=key,
         num_runs=num_runs, block=prep.block, mesh=mesh, run_axis=mesh_axis, chunk_size=chunk_size,
         progress=progress, desc="Monte Carlo")
-    return _summarize(sums, prep.num_scored, confidence, shared, prep.components[1])
+    return _summarize(sums, prep.num_scored, confidence, shared, prep.components[1], **_key_fields(key))
 
 
 def monte_carlo_sweep(
@@ -654,6 +654,7 @@ def monte_carlo_sweep(
         block=block, mesh=mesh, run_axis=run_axis, sweep_axis=sweep_axis, chunk_size=chunk_size,
         progress=progress, desc="Monte Carlo sweep")
     return [
-        _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), n, confidence, shared, prep.components[1])
+        _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), n, confidence, shared, prep.components[1],
+                   **_key_fields(key))
         for j in range(num_values)
     ]
