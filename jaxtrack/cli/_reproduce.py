@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..applications._report import format_rows
+from ..applications._report import count_by_source, format_rows, summary_line
 
 # study name → (module with `reproduce(out_dir) -> (rows, figures)`, table title)
 STUDIES = {
@@ -46,10 +46,36 @@ def precision_error(name: str) -> str | None:
     return f"study {name} needs float64 ({NEEDS_FLOAT64[name]}); unset JAXTRACK_ENABLE_X64"
 
 
+SCHEMA_VERSION = 1
+"""Version of the ``--json`` document (``jaxtrack/cli/schemas/reproduce.schema.json``); bumped
+when a key is removed or changes meaning."""
+
+
+def json_schema() -> dict:
+    """The JSON Schema of the ``--json`` document (package data ``cli/schemas/reproduce.schema.json``).
+
+    **Returns:** the schema, a dict (validate with e.g. ``jsonschema.validate(doc, json_schema())``).
+    """
+    from importlib.resources import files
+
+    return json.loads(files("jaxtrack.cli").joinpath("schemas", "reproduce.schema.json").read_text(encoding="utf-8"))
+
+
 def run(study: str, out: str, as_json: bool) -> int:
+    """Reproduce ``study`` (or ``"all"``): print each table (or one JSON document) and the summary.
+
+    The summary counts the rows by the source of their reference number (printed in a paper,
+    derived in a specification, a study's stated claim), then in total.
+
+    **Arguments:** ``study``: a key of :data:`STUDIES` or ``"all"``; ``out``: the figure folder;
+    ``as_json``: print the schema-versioned JSON document instead of the tables.
+
+    **Returns:** the exit status: 0 when every row passes, 1 when one misses, 2 when a study
+    refuses the current precision.
+    """
     names = list(STUDIES) if study == "all" else [study]
-    results = {}
-    total = passed = 0
+    studies = {}
+    all_rows = []
     for name in names:
         if msg := precision_error(name):
             print(f"jaxtrack reproduce: error: {msg}", file=sys.stderr)
@@ -59,26 +85,31 @@ def run(study: str, out: str, as_json: bool) -> int:
         t0 = time.perf_counter()
         rows, figures = module.reproduce(Path(out) / name)
         elapsed = time.perf_counter() - t0
-        results[name] = [r.as_dict() for r in rows]
-        total += len(rows)
-        passed += sum(r.ok for r in rows)
+        studies[name] = {"title": title, "seconds": round(elapsed, 3), "figures": [str(f) for f in figures],
+                         "rows": [r.as_dict() for r in rows]}
+        all_rows.extend(rows)
         if not as_json:
             print(format_rows(rows, f"{title} — {elapsed:.1f} s"))
             for path in figures:
                 print(f"figure: {path}")
             print()
+    counts = count_by_source(all_rows)
     if as_json:
-        print(json.dumps(results[study] if study != "all" else results, indent=2))
+        print(json.dumps({"schema_version": SCHEMA_VERSION, "studies": studies,
+                          "summary": {**counts, "total": [sum(p for p, _ in counts.values()),
+                                                          sum(t for _, t in counts.values())]}},
+                         indent=2, ensure_ascii=False))
     else:
-        print(f"{passed}/{total} paper numbers reproduced within tolerance across {len(names)} "
-              f"stud{'y' if len(names) == 1 else 'ies'}")
-    return 0 if passed == total else 1
+        print(summary_line(counts, len(names)))
+    return 0 if all(r.ok for r in all_rows) else 1
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("reproduce", help="reproduce a study's printed numbers (table) and figures (PNG)")
     p.add_argument("study", choices=[*STUDIES, "all"], help="which study, or all of them")
-    p.add_argument("--json", action="store_true", help="print the rows as JSON (keys id, quantity, paper, value, rtol, ok)")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON document (schema_version 1: studies → title, seconds, figures, rows "
+                        "with id, quantity, source, bound, paper, lo, hi, value, rtol, ok; summary per source)")
     p.add_argument("--out", default="results", help="folder for figures (one subfolder per study)")
 
 

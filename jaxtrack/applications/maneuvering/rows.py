@@ -1,9 +1,9 @@
 """The maneuvering study's headline numbers as rows, and :func:`reproduce`.
 
 This is our own scenario, not a paper's: each row states a claim with the margin the study
-commits to (``bound="at_most"``/``"at_least"``, the "paper" column holding the bound), so that
-``jaxtrack reproduce maneuvering`` fails if a change to the library breaks the claim. Ratios are
-paired over the same runs, with 95% delta-method bounds
+commits to (``bound="at_most"``/``"at_least"``, the reference column holding the bound;
+``source="claim"``), so that ``jaxtrack reproduce maneuvering`` fails if a change to the
+library breaks the claim. Ratios are paired over the same runs, with 95% delta-method bounds
 (:func:`jaxtrack.montecarlo.time_averaged_rmse_ratio`); the upper bound is what is compared.
 """
 
@@ -49,24 +49,24 @@ def paper_rows(study: ManeuveringStudy | None = None, num_runs: int = DEFAULT_RU
         iv = time_averaged_rmse_ratio(e["imm"], e[ref])
         rows.append(PaperRow("M1" if ref == "cv" else "M2",
                              f"IMM/{name} time-avg pos. RMSE, upper 95% (ratio {iv.value:.3f})",
-                             RATIO_MARGIN, iv.upper, 0.0, "at_most"))
+                             RATIO_MARGIN, iv.upper, 0.0, "at_most", source="claim"))
     imm = study.results["imm"]
     lo, hi = (float(b) for b in imm.anees_bounds)
     rows.append(PaperRow("M3", f"IMM ANEES, x y vx vy (95% χ² bounds [{lo:.3f}, {hi:.3f}])",
-                         1.0, float(imm.anees), ANEES_TOLERANCE))
+                         1.0, float(imm.anees), ANEES_TOLERANCE, source="claim"))
     iv = time_averaged_rmse_ratio(e["imm_smoother"], e["imm"])
     rows.append(PaperRow("M4", f"IMM smoother/filter time-avg pos. RMSE, upper 95% (ratio {iv.value:.3f})",
-                         SMOOTHER_MARGIN, iv.upper, 0.0, "at_most"))
+                         SMOOTHER_MARGIN, iv.upper, 0.0, "at_most", source="claim"))
     iv = time_averaged_rmse_ratio(e["imm_learned"], e["imm"])
     rows.append(PaperRow("M5", f"learned/designed IMM time-avg pos. RMSE, upper 95% (ratio {iv.value:.3f})",
-                         LEARNED_MARGIN, iv.upper, 0.0, "at_most"))
+                         LEARNED_MARGIN, iv.upper, 0.0, "at_most", source="claim"))
     T = imm.mode_probs.shape[0]
     late, legs = _late_turn_and_leg_steps(T)
     mu_turn = np.asarray(imm.mode_probs)[:, 1]
     rows.append(PaperRow("M6", "IMM turn-mode probability, mean over the turns' second halves",
-                         0.7, float(mu_turn[late].mean()), 0.0, "at_least"))
+                         0.7, float(mu_turn[late].mean()), 0.0, "at_least", source="claim"))
     rows.append(PaperRow("M7", "IMM turn-mode probability, mean over legs ≥ 20 s after a turn",
-                         0.35, float(mu_turn[legs].mean()), 0.0, "at_most"))
+                         0.35, float(mu_turn[legs].mean()), 0.0, "at_most", source="claim"))
     return rows
 
 

@@ -13,7 +13,7 @@ from ... import geometry
 from ...estimation import observability
 from .._report import PaperRow, printed_rtol, write_figures
 from .analysis import baseline_rotation_attitudes, equivalent_errors_exact, equivalent_errors_first_order
-from .cost import cubic_cost_ratio, measure_filter_times, update_flops, update_multiply_adds
+from .cost import cubic_cost_ratio, update_flops, update_multiply_adds
 from .figures import (
     figure_attitude_rmse,
     figure_bias_rmse,
@@ -43,10 +43,11 @@ GEOMETRY_TABLE = (  # scan k: (radar 1 r km, az deg, el deg), (radar 2 ...)
 """Spec §4.5: noise-free, bias-free geometry at t = (k−1)T (V13)."""
 
 
-def _interval_row(tid: str, quantity: str, lo: float, hi: float, value: float) -> PaperRow:
-    """A row that passes iff ``lo ≤ value ≤ hi``: the paper column holds the interval's midpoint
-    and rtol its half-width (PaperRow compares to a point). Used for the spec's margins."""
-    return PaperRow(tid, f"{quantity} in [{lo:g}, {hi:g}]", 0.5 * (lo + hi), float(value), (hi - lo) / (hi + lo))
+def _interval_row(tid: str, quantity: str, lo: float, hi: float, value: float, source: str = "spec") -> PaperRow:
+    """A row that passes iff ``lo ≤ value ≤ hi`` (``bound="interval"``): the spec's margins and
+    check ranges. The quantity names the interval; ``source`` is ``"spec"`` unless the bound is
+    printed in the paper (S1's "< 0.5°")."""
+    return PaperRow.interval(tid, f"{quantity} in [{lo:g}, {hi:g}]", lo, hi, float(value), source=source)
 
 
 def _random_prop2_gap(key, num: int = 2000) -> tuple[float, float]:
@@ -70,8 +71,10 @@ def _prop2_gap_jit(key, num):
 def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = None) -> list[PaperRow]:
     """Every spec target V1–V14, S1–S7 that has a number, as table rows.
 
-    The paper prints two numbers ("< 0.5°" and "about 80%"); the rest are the spec's check values
-    [V] and its Monte Carlo margins (§5.2), encoded by :func:`_interval_row`. The Monte Carlo
+    The paper prints two numbers ("< 0.5°" and "about 80%"): the S1 rows bounded by 0.5° (OBEM at
+    every k ≥ 100, AAM at k = 200, big P0) and the O(n³) row are ``source="paper"``. The rest are
+    the spec's check values [V] and its Monte Carlo margins (§5.2, ``"spec"``), the margins as
+    intervals (:func:`_interval_row`). The Monte Carlo
     uses ``num_runs`` runs with key ``seed``. Pass a dict as ``results`` to receive the
     intermediate objects (Monte Carlo results, scans) for the figures.
 
@@ -89,7 +92,7 @@ def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = 
     for i in range(3):
         for j in range(3):
             add(PaperRow("V1", f"T_p2ENU(2°,1°,1°) t{i + 1}{j + 1}", _ATTITUDE_CHECK[i][j], float(t[i, j]),
-                         printed_rtol(_ATTITUDE_CHECK[i][j], 1e-8, floor=0.0)))
+                         printed_rtol(_ATTITUDE_CHECK[i][j], 1e-8, floor=0.0), source="spec"))
 
     # V3: sites, baseline, ship 2 in the FC ENU frame.
     sites = sc.ship_sites
@@ -97,12 +100,12 @@ def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = 
         x = np.asarray(geometry.geodetic_to_ecef(s[0], s[1], s[2]))
         for a in range(3):
             add(PaperRow("V3", f"X_{1 + _SITE_CHECK.index(check)}s ECEF {'xyz'[a]} [m]", check[a], float(x[a]),
-                         printed_rtol(check[a], 1e-3, floor=0.0)))
+                         printed_rtol(check[a], 1e-3, floor=0.0), source="spec"))
     base = geometry.enu_site_offset(sites[0, 0], sites[0, 1], sites[1, 0], sites[1, 1], sites[0, 2], sites[1, 2])
     add(PaperRow("V3", "initial baseline |X_2s − X_1s| [km]", 100.385, float(jnp.linalg.norm(base)) / 1e3,
-                 printed_rtol(100.385, 1e-3)))
+                 printed_rtol(100.385, 1e-3), source="spec"))
     for a, v in enumerate((-55.74, 83.49, -0.79)):
-        add(PaperRow("V3", f"ship 2 in FC ENU, {'ENU'[a]} [km]", v, float(base[a]) / 1e3, printed_rtol(v, 1e-2)))
+        add(PaperRow("V3", f"ship 2 in FC ENU, {'ENU'[a]} [km]", v, float(base[a]) / 1e3, printed_rtol(v, 1e-2), source="spec"))
 
     # V8, V11, V13 on the deterministic track.
     det_key = jax.random.key(0)
@@ -119,19 +122,19 @@ def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = 
     for k, r1, r2 in GEOMETRY_TABLE:
         for i, ref in ((0, r1), (1, r2)):
             v = np.asarray(free.raw[i, k - 1])
-            add(PaperRow("V13", f"scan {k}, radar {i + 1}: range [km]", ref[0], v[0] / 1e3, 0.05 / ref[0]))
-            add(PaperRow("V13", f"scan {k}, radar {i + 1}: azimuth [deg]", ref[1], v[1] / DEG, 0.05 / abs(ref[1])))
-            add(PaperRow("V13", f"scan {k}, radar {i + 1}: elevation [deg]", ref[2], v[2] / DEG, 0.05 / ref[2]))
+            add(PaperRow("V13", f"scan {k}, radar {i + 1}: range [km]", ref[0], v[0] / 1e3, 0.05 / ref[0], source="spec"))
+            add(PaperRow("V13", f"scan {k}, radar {i + 1}: azimuth [deg]", ref[1], v[1] / DEG, 0.05 / abs(ref[1]), source="spec"))
+            add(PaperRow("V13", f"scan {k}, radar {i + 1}: elevation [deg]", ref[2], v[2] / DEG, 0.05 / ref[2], source="spec"))
 
     # V10: Proposition 2 check values.
     att = jnp.array([2 * DEG, 1 * DEG, 1 * DEG])
     x0 = jnp.array([60e3, 30e3, 5e3])
     ex = np.asarray(equivalent_errors_exact(att, x0))
     fo = np.asarray(equivalent_errors_first_order(att, x0))
-    add(PaperRow("V10", "Δθ_c exact at (60, 30, 5) km [deg]", -2.0338, ex[1] / DEG, 5e-4 / 2.0338))
-    add(PaperRow("V10", "Δθ_c first order (36) [deg]", -2.0333, fo[1] / DEG, printed_rtol(-2.0333, 1e-4)))
-    add(PaperRow("V10", "Δε_c exact [deg]", -1.3565, ex[2] / DEG, 5e-4 / 1.3565))
-    add(PaperRow("V10", "Δε_c first order (45) [deg]", -1.3416, fo[2] / DEG, printed_rtol(-1.3416, 1e-4)))
+    add(PaperRow("V10", "Δθ_c exact at (60, 30, 5) km [deg]", -2.0338, ex[1] / DEG, 5e-4 / 2.0338, source="spec"))
+    add(PaperRow("V10", "Δθ_c first order (36) [deg]", -2.0333, fo[1] / DEG, printed_rtol(-2.0333, 1e-4), source="spec"))
+    add(PaperRow("V10", "Δε_c exact [deg]", -1.3565, ex[2] / DEG, 5e-4 / 1.3565, source="spec"))
+    add(PaperRow("V10", "Δε_c first order (45) [deg]", -1.3416, fo[2] / DEG, printed_rtol(-1.3416, 1e-4), source="spec"))
     add(_interval_row("V10", "|Δr_c| exact [m]", 0.0, 1e-9, abs(ex[0])))
     gap_az, gap_el = _random_prop2_gap(jax.random.key(10))
     add(_interval_row("V10", "max |exact − (36)| random geometry [deg]", 0.0, 0.03, gap_az))
@@ -139,38 +142,42 @@ def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = 
 
     # V11: observability.
     o14, o12, o8 = (observability(h) for h in (free_in.H, merged_columns(free_in.H), obem_columns(free_in.H)))
-    add(PaperRow("V11", "AAM-14: eigenvalues < 1e-10 λ_max", 3.0, float(o14.num_null()), 0.0))
-    add(PaperRow("V11", "AAM-12: eigenvalues < 1e-10 λ_max (Prop. 1 says 0)", 1.0, float(o12.num_null()), 0.0))
-    add(PaperRow("V11", "AAM-12 λ_max (column-normalised)", 4.17, float(o12.eigenvalues[-1]), printed_rtol(4.17, 0.01)))
-    add(PaperRow("V11", "OBEM-8 cond(M) (spec ≈ 140; bound 1e3)", 140, float(o8.condition), printed_rtol(140, 10)))
-    add(PaperRow("V11", "OBEM-8 smallest eigenvalue", 0.015, float(o8.eigenvalues[0]), printed_rtol(0.015, 0.001)))
+    add(PaperRow("V11", "AAM-14: eigenvalues < 1e-10 λ_max", 3.0, float(o14.num_null()), 0.0, source="spec"))
+    add(PaperRow("V11", "AAM-12: eigenvalues < 1e-10 λ_max (Prop. 1 says 0)", 1.0, float(o12.num_null()), 0.0, source="spec"))
+    add(PaperRow("V11", "AAM-12 λ_max (column-normalised)", 4.17, float(o12.eigenvalues[-1]), printed_rtol(4.17, 0.01), source="spec"))
+    add(PaperRow("V11", "OBEM-8 cond(M) (spec ≈ 140; bound 1e3)", 140, float(o8.condition), printed_rtol(140, 10), source="spec"))
+    add(PaperRow("V11", "OBEM-8 smallest eigenvalue", 0.015, float(o8.eigenvalues[0]), printed_rtol(0.015, 0.001), source="spec"))
     null = np.abs(o12.physical_direction(0))
     for name, v in zip(("Δη1", "Δψ1", "Δη2", "Δψ2"), (0.67, 1.0, 0.67, 0.99)):
         add(PaperRow("V11", f"AAM-12 null vector, |{name}| / max", v, float(null[MERGED_STATES.index(name)]),
-                     printed_rtol(v, 0.01)))
+                     printed_rtol(v, 0.01), source="spec"))
     o12b = observability(merged_columns(b_in.H))
     add(PaperRow("V11", "AAM-12 smallest eigenvalue, biased raw data", 1.9e-6, float(o12b.eigenvalues[0]),
-                 printed_rtol(1.9e-6, 0.1e-6)))
+                 printed_rtol(1.9e-6, 0.1e-6), source="spec"))
     rot = np.asarray(baseline_rotation_attitudes(sites[0], sites[1]))
     rot = rot * np.sign(rot[0, 0])
     for p, ref in ((0, (0.0079, -0.555, -0.832)), (1, (-0.0079, -0.561, -0.828))):
         for j, v in enumerate(ref):
             add(PaperRow("V11", f"baseline rotation, platform {p + 1} {('Δφ', 'Δη', 'Δψ')[j]} [rad/rad]", v,
-                         float(rot[p, j]), printed_rtol(v, 1e-4 if j == 0 else 1e-3)))
+                         float(rot[p, j]), printed_rtol(v, 1e-4 if j == 0 else 1e-3), source="spec"))
 
     # V14: cost.
-    add(PaperRow("V14", "1 − (8/14)³, O(n³) reduction [%] (paper: about 80)", 80.0, 100 * (1 - cubic_cost_ratio()), 0.0625))
+    add(PaperRow("V14", "1 − (8/14)³, O(n³) reduction [%] (paper: about 80)", 80.0, 100 * (1 - cubic_cost_ratio()), 0.0625, source="paper"))
     for n, joseph, v in ((14, False, 1428), (8, False, 528), (14, True, 6916), (8, True, 1552)):
         add(PaperRow("V14", f"multiply-adds per update, n = {n}{', Joseph' if joseph else ''}", v,
-                     float(update_multiply_adds(n, joseph=joseph)), 0.0))
+                     float(update_multiply_adds(n, joseph=joseph)), 0.0, source="spec"))
     flops = 100 * (1 - update_flops(8) / update_flops(14))
     # jaxtrack's update evaluates the Joseph form through the rank-m structure of I − W H
     # (O(n²m), not O(n³)), so the compiled FLOPs shrink less than the cubic model: ≈ 59%, not
     # the spec's optional ≥ 60%, whose basis was a dense O(n³) update.
     add(_interval_row("V14", "XLA FLOPs reduction OBEM vs AAM (rank-m update) [%]", 50.0, 100.0, flops))
-    t_aam, t_obem = measure_filter_times(b_in)
-    add(PaperRow("V14", f"measured time reduction [%], OBEM/AAM = {t_obem / t_aam:.2f}", 80.0,
-                 100 * (1 - t_obem / t_aam), 1.0))
+    # The abstract's "about 80%" has no measurement behind it (spec §2.7), and wall-clock time of
+    # small jitted kernels is overhead-dominated, so it is never a row (spec V14: "do not assert on
+    # wall-clock"; :func:`measure_filter_times` reports it). The counted cost is the spec's
+    # multiply-add model with the Joseph form, 6916 vs 1552: 77.6% (spec §2.7), to the printed digit.
+    madds = 100 * (1 - update_multiply_adds(8, joseph=True) / update_multiply_adds(14, joseph=True))
+    add(PaperRow("V14", "multiply-add reduction OBEM vs AAM per update, Joseph form [%] (spec §2.7)", 77.6,
+                 madds, printed_rtol(77.6, 0.1, floor=0.0), source="spec"))
 
     # S1–S5, S7: Monte Carlo.
     mc = monte_carlo(sc, key, num_runs, prior="big")
@@ -180,8 +187,9 @@ def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = 
     az, el = np.asarray(mc.azimuth_minus_yaw) / DEG, np.asarray(mc.elevation) / DEG
     az2 = np.asarray(mc2.azimuth_minus_yaw) / DEG
     for i in (0, 1):
-        add(_interval_row("S1", f"OBEM max_k≥100 RMSE(Δθ{i + 1}−Δφ{i + 1}) [deg] (paper < 0.5)", 0.0, 0.5, az[1, i, late].max()))
-        add(_interval_row("S1", f"AAM RMSE(Δθ{i + 1}−Δφ{i + 1}) at k = 200 [deg]", 0.0, 0.5, az[0, i, last]))
+        add(_interval_row("S1", f"OBEM max_k≥100 RMSE(Δθ{i + 1}−Δφ{i + 1}) [deg] (paper < 0.5)", 0.0, 0.5, az[1, i, late].max(),
+                          "paper"))
+        add(_interval_row("S1", f"AAM RMSE(Δθ{i + 1}−Δφ{i + 1}) at k = 200 [deg]", 0.0, 0.5, az[0, i, last], "paper"))
         add(_interval_row("S1", f"AAM max_k≥100 RMSE(Δθ{i + 1}−Δφ{i + 1}), 2×truth P0 [deg]", 0.0, 0.5, az2[0, i, late].max()))
     for i in (0, 1):
         add(_interval_row("S2", f"RMSE Δε{i + 1} OBEM/AAM, mean k∈[150,200]", 0.0, 0.8,
@@ -215,7 +223,7 @@ def paper_rows(num_runs: int = 100, seed: int = 2024, *, results: dict | None = 
 
     if results is not None:
         results.update(mc=mc, mc_twice=mc2, mc_tilt=mc_tilt, free_scans=free, free_inputs=free_in,
-                       biased_scans=biased, times=(t_aam, t_obem))
+                       biased_scans=biased)
     return rows
 
 

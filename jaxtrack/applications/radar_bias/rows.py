@@ -20,6 +20,9 @@ def paper_rows() -> list[PaperRow]:
     - V8: the printed "Cost" of each example, as Σ e²/k² (spec A8; F(e*) itself is 1.9e5, 1.45e5).
     - V19: the 9 rows of the β table, both printed roots of (104); tolerance atol 5e-5 (spec §4,
       A22) expressed as rtol.
+
+    Every reference number is printed in the paper (``source="paper"``): the Δ values and costs
+    of §2.3 and both real roots of each row of the β table.
     """
     rows: list[PaperRow] = []
     weights = jnp.asarray(_EXAMPLE_WEIGHTS)
@@ -27,14 +30,14 @@ def paper_rows() -> list[PaperRow]:
         sol = solve_example(name)
         e = np.asarray(jnp.concatenate([sol.e1, sol.e2]))
         for label, paper, value in zip(E_NAMES, ex.printed_e, e):
-            rows.append(PaperRow("V7", f"example {name}: {label}", paper, float(value), 1e-4))
+            rows.append(PaperRow("V7", f"example {name}: {label}", paper, float(value), 1e-4, source="paper"))
         rows.append(PaperRow("V8", f"example {name}: printed 'Cost' = Σe²/k² [m²] (F* = {float(sol.cost):.4g})",
-                             ex.printed_cost, float(printed_cost(e, weights)), 1e-4))
+                             ex.printed_cost, float(printed_cost(e, weights)), 1e-4, source="paper"))
     for rho, alpha, beta_paper, other in PAPER_BETA_TABLE:
         rows.append(PaperRow("V19", f"ρ={rho:g}, α={alpha:g}: β, real root of cubic of (105)", beta_paper,
-                             float(paper_beta(alpha, rho)), 5e-5 / beta_paper))
+                             float(paper_beta(alpha, rho)), 5e-5 / beta_paper, source="paper"))
         rows.append(PaperRow("V19", f"ρ={rho:g}, α={alpha:g}: other real root of (104)", other,
-                             float(paper_quartic_real_roots(alpha, rho)[-1]), 5e-5 / other))
+                             float(paper_quartic_real_roots(alpha, rho)[-1]), 5e-5 / other, source="paper"))
     return rows
 
 

@@ -32,8 +32,13 @@ from .states import ACCEL_BIAS, ATTITUDE, DEG_PER_HOUR, GYRO_BIAS, MICRO_G, MRAD
 from .targeting import targeting_round_trip_error
 
 def _row(tid: str, quantity: str, paper: float, value, last_digit: float, floor: float = 1e-6) -> PaperRow:
-    """A row whose tolerance is the spec's (``floor``) or half a unit in the printed last digit."""
-    return PaperRow(tid, quantity, float(paper), float(value), max(floor, 0.5 * last_digit / abs(paper)))
+    """A row whose tolerance is the spec's (``floor``) or half a unit in the printed last digit.
+
+    Its reference is the spec's (``source="spec"``): the report is a derivation with no numerical
+    results (spec §0), so every number here is an [EXT] reference value, a closed form or a unit
+    conversion computed in the specification.
+    """
+    return PaperRow(tid, quantity, float(paper), float(value), max(floor, 0.5 * last_digit / abs(paper)), source="spec")
 
 
 def paper_rows(single: SingleLookAnalysis | None = None) -> list[PaperRow]:
