@@ -8,9 +8,15 @@ from collections.abc import Sequence
 # picks the headless Agg backend for itself (jaxtrack.cli.main).
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.ticker import ScalarFormatter
+from matplotlib.ticker import FuncFormatter
 
 from .montecarlo import MonteCarloResult
+
+__all__ = [
+    "plot_monte_carlo",
+    "plot_mode_probabilities",
+    "log_scale_y",
+]
 
 
 def plot_monte_carlo(
@@ -53,31 +59,26 @@ def plot_monte_carlo(
         ax.set_xlabel(f"time [{time_unit}]" if times is not None else "step")
         unit = rmse_unit.get(title)
         ax.set_ylabel(f"RMSE [{unit}]" if unit else "RMSE")
-        _log_axis(ax)
+        log_scale_y(ax)
         ax.legend(fontsize=8)
     ax = axes[-1]
     n = first.mse.shape[1]
     for label, res in results.items():
-        ax.plot(t, np.asarray(res.nees), label=f"{label} (ANEES {float(res.anees):.3f})")
+        ax.plot(t, np.asarray(res.nees), lw=1, label=f"{label} (ANEES {float(res.anees):.3f})")
+    ax.axhline(n, color="k", lw=0.6, ls=":", zorder=1.5)
     bounds = np.asarray(first.nees_bounds)
-    ax.fill_between(t, bounds[:, 0], bounds[:, 1], color="0.8", alpha=0.7,
+    # With 10⁴ runs the band is ±1.4 % of n, a few pixels high: a light fill alone disappears
+    # under the NEES line inside it, so its two edges are drawn as dark lines above the data.
+    ax.fill_between(t, bounds[:, 0], bounds[:, 1], color="C2", alpha=0.35, lw=0, zorder=1,
                     label=f"{first.confidence:.0%} χ² bounds")
-    ax.axhline(n, color="k", lw=0.8)
+    for edge in (bounds[:, 0], bounds[:, 1]):
+        ax.plot(t, edge, color="k", lw=0.9, zorder=3)
     ax.set_title("average NEES")
     ax.set_xlabel(f"time [{time_unit}]" if times is not None else "step")
     ax.set_ylabel(f"NEES (n = {n})")
-    _log_axis(ax)
+    log_scale_y(ax)
     ax.legend(fontsize=8)
     return fig
-
-
-def _log_axis(ax):
-    """Log y axis with plain numbers (not 9×10⁰) on its ticks."""
-    ax.set_yscale("log")
-    for axis in (ax.yaxis,):
-        axis.set_major_formatter(ScalarFormatter())
-        axis.set_minor_formatter(ScalarFormatter())
-    ax.grid(True, which="both", alpha=0.3)
 
 
 def plot_mode_probabilities(
@@ -119,3 +120,81 @@ def plot_mode_probabilities(
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
     return fig
+
+
+# Log axes: a log scale only where the data span at least three 1-2-5 ticks, a factor of 5 or more
+# (below that a log axis shows one tick label or none, or two far apart, and reads no better than a
+# linear one); and values that are zero to round-off (1e-16 next to 1e3) are left out: drawn,
+# they stretch the axis over 18 decades and flatten every curve that matters. Genuine data over
+# many decades (a variance falling from 1 to 1e-11) stay: the round-off threshold is near the
+# float64 epsilon, and no decade limit is applied unless asked for.
+_NICE = (1.0, 2.0, 5.0)
+
+
+def _nice_ticks_between(lo: float, hi: float) -> int:
+    """How many 1-2-5 × 10^k values lie in ``[lo, hi]`` (``0 < lo ≤ hi``)."""
+    count = 0
+    for k in range(int(np.floor(np.log10(lo))), int(np.floor(np.log10(hi))) + 1):
+        count += sum(lo <= s * 10.0**k <= hi for s in _NICE)
+    return count
+
+
+def log_scale_y(ax, *, max_decades: float | None = None, roundoff: float = 1e-13) -> bool:
+    """Put ``ax``'s y axis on a readable log scale, or on a linear one where log would not help.
+
+    Call it after the lines are drawn. Values at or below ``roundoff`` × the largest value are
+    zero to round-off: they are not drawn (a note on the axes says so), since a log axis cannot
+    show zero. With ``max_decades``, the lower limit is at most that many decades below the
+    largest value (curves below it leave the axes). When the
+    remaining data span fewer than three 1-2-5 ticks (say 7 to 24 m: only 10 and 20) the axis
+    stays linear, so that every axis has several labelled ticks. Wide log axes (over 3 decades)
+    keep matplotlib's decade ticks; narrower ones get 1-2-5 ticks labelled as plain numbers.
+
+    **Arguments:**
+
+    - ``ax``: a matplotlib ``Axes`` with its lines drawn (``Line2D`` artists, y data in any
+      positive unit).
+    - ``max_decades``: the most decades shown below the largest value (default: no limit).
+    - ``roundoff``: relative size (to the largest value on the axes) at or below which a value
+      counts as zero; the default is about 450 float64 epsilons.
+
+    **Returns:** ``True`` if the axis is logarithmic, ``False`` if it was left linear.
+    """
+    from matplotlib.ticker import LogLocator, NullFormatter
+
+    lines = [ln for ln in ax.get_lines() if np.size(ln.get_ydata()) > 2]
+    values = np.concatenate([np.asarray(ln.get_ydata(), float).ravel() for ln in lines]) if lines else np.zeros(0)
+    positive = values[np.isfinite(values) & (values > 0)]
+    if positive.size == 0:  # nothing drawn as lines (markers, fills): a plain log axis
+        ax.set_yscale("log")
+        return True
+    hi = float(positive.max())
+    zero = roundoff * hi
+    masked = False
+    for ln in lines:
+        y = np.asarray(ln.get_ydata(), float)
+        if np.any(np.isfinite(y) & (y <= zero)):
+            ln.set_ydata(np.where(y <= zero, np.nan, y))
+            masked = True
+    if masked:
+        ax.text(0.01, 0.01, f"values ≤ {roundoff:g} × max (zero to round-off) not drawn", transform=ax.transAxes,
+                fontsize=6, color="0.35", va="bottom")
+    kept = positive[positive > zero]
+    lo = float(kept.min()) if max_decades is None else max(float(kept.min()), hi / 10.0**max_decades)
+    if _nice_ticks_between(lo, hi) < 3:
+        ax.set_yscale("linear")
+        ax.relim()
+        ax.autoscale_view()
+        ax.grid(True, which="major", alpha=0.3)
+        return False
+    ax.set_yscale("log")
+    pad = (hi / lo) ** 0.04
+    ax.set_ylim(lo / pad, hi * pad)
+    if np.log10(hi / lo) <= 3.0:
+        # 1-2-5 major ticks labelled as plain numbers, unlabelled minor ticks: at most three
+        # labels a decade, so they never overlap.
+        ax.yaxis.set_major_locator(LogLocator(subs=_NICE))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.grid(True, which="both", alpha=0.25)
+    return True

@@ -1,29 +1,45 @@
-"""Every notebook executes top to bottom at a small size."""
+"""Every notebook executes top to bottom at a small size and shows at least one figure.
 
+The executed notebooks are kept as ``docs/gallery/<name>.ipynb`` (gitignored): ``make docs``
+renders those copies instead of executing every notebook a second time (it executes only the
+missing or stale ones, with the same function, ``tools/execute_notebooks.py``).
+"""
+
+import importlib.util
 from pathlib import Path
 
-import nbformat
 import pytest
-from nbclient import NotebookClient
 
-NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+ROOT = Path(__file__).parent.parent
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
+
+_spec = importlib.util.spec_from_file_location("_execute_notebooks", ROOT / "tools" / "execute_notebooks.py")
+execute_notebooks = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(execute_notebooks)
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
-def test_notebook_executes(path, monkeypatch, tmp_path):
-    monkeypatch.setenv("JAXTRACK_NOTEBOOK_SMALL", "1")
+def test_notebook_executes(path, tmp_path):
     # The kernel's own (inline) matplotlib backend, as a user's Jupyter has: the figures must
     # come back as image outputs (jaxtrack never switches the backend).
-    monkeypatch.delenv("MPLBACKEND", raising=False)
-    nb = nbformat.read(path, as_version=4)
-    client = NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}})
-    client.execute()
-    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
-    errors = [o for o in outputs if o.output_type == "error"]
+    nb = execute_notebooks.execute_notebook(path, tmp_path)
+    errors = [o for o in execute_notebooks.outputs(nb) if o.output_type == "error"]
     assert not errors
-    images = [o for o in outputs if o.output_type in ("display_data", "execute_result") and "image/png" in o.get("data", {})]
-    assert len(images) >= 1, f"{path.name} showed no figure"
+    assert len(execute_notebooks.image_outputs(nb)) >= 1, f"{path.name} showed no figure"
+    # Only a notebook that passed becomes the gallery's copy.
+    execute_notebooks.write_atomically(nb, execute_notebooks.gallery_path(path))
 
 
 def test_there_are_notebooks():
     assert NOTEBOOKS, "notebooks/ holds no notebook"
+
+
+def test_write_atomically_replaces_and_leaves_no_temporary(tmp_path):
+    import nbformat
+
+    dest = tmp_path / "gallery" / "x.ipynb"
+    for text in ("first", "second"):
+        nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell(text)])
+        execute_notebooks.write_atomically(nb, dest)
+    assert nbformat.read(dest, as_version=4).cells[0].source == "second"
+    assert [p.name for p in dest.parent.iterdir()] == ["x.ipynb"]

@@ -147,13 +147,13 @@ def test_cli_demo_across_two_processes_matches_one(tmp_path):
         assert p.returncode == 0, err[-3000:]
     # Gloo prints connection messages on stdout; the rest is the JSON table.
     printed = ["\n".join(line for line in out.splitlines() if not line.startswith("[Gloo]")) for out, _ in outs]
-    rows = json.loads(printed[0])
+    rows = json.loads(printed[0])["rows"]
     assert printed[1].strip() == "" and not (tmp_path / "p1").exists()
     assert (tmp_path / "p0" / "demo.png").exists()
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         assert main([*args, "--out", str(tmp_path / "single")]) == 0
-    single = json.loads(buf.getvalue())
+    single = json.loads(buf.getvalue())["rows"]
     for a, b in zip(rows, single, strict=True):
         a.pop("seconds"), b.pop("seconds")
         assert a == b

@@ -91,7 +91,7 @@ def _run(args) -> int:
 
         return _design.run(args)
     if args.command == "demo":
-        from ._demo import format_table, run_demo
+        from ._demo import format_table, json_document, run_demo
 
         sharded = _start_devices(args)
         import jax
@@ -108,7 +108,7 @@ def _run(args) -> int:
             print(f"runs shared over {mesh.devices.size} devices in {jax.process_count()} process(es)",
                   file=sys.stderr)
         if args.json:
-            print(json.dumps(out["rows"], indent=2))
+            print(json.dumps(json_document(out["rows"]), indent=2))
         else:
             print(format_table(out["rows"]))
             print(f"figure: {out['figure']}\ntable:  {out['table']}")

@@ -47,11 +47,13 @@ def run_demo(num_runs: int = 10_000, num_steps: int = 100, seed: int = 0, out_di
              chunk_size: int = 2_000, progress: bool = True, mesh=None, write: bool = True) -> dict:
     """Run the demo, write ``demo.png`` and ``demo.json`` into ``out_dir``, return the table rows.
 
+    ``rows``: one dict per filter (keys and units in ``jaxtrack/cli/schemas/demo.schema.json``);
+    ``figure`` and ``table``: the written paths (None when ``write=False``); ``results`` and
+    ``theory``: the Monte Carlo results and √tr P curves behind the figure (:func:`demo_figure`).
+
     ``mesh``: share the runs over a device mesh (see :func:`jaxtrack.montecarlo.run_mesh`; the
     numbers are those of one device). ``write=False`` skips the files (processes other than 0).
     """
-    from ..plotting import plot_monte_carlo
-
     truth, filters = demo_models()
     key = jax.random.key(seed)
     results, rows, theory = {}, [], {}
@@ -83,17 +85,11 @@ def run_demo(num_runs: int = 10_000, num_steps: int = 100, seed: int = 0, out_di
         })
     out = Path(out_dir)
     if not write:
-        return {"rows": rows, "figure": None, "table": None}
+        return {"rows": rows, "figure": None, "table": None, "results": results, "theory": theory}
     out.mkdir(parents=True, exist_ok=True)
-    fig = plot_monte_carlo(
-        results,
-        rmse_components={"position": (0, 1), "velocity": (2, 3)},
-        theory_rmse=theory,
-        times=SAMPLING_PERIOD * np.arange(num_steps),
-        rmse_unit={"position": "m", "velocity": "m/s"},
-    )
-    fig.suptitle(f"2-D constant velocity, τ = {SAMPLING_PERIOD} s, q = {ACCEL_PSD} m²/s³, σ = {MEASUREMENT_STD} m")
-    # Temporary names renamed when complete: Ctrl-C while saving leaves no partial file.
+    fig = demo_figure(results, theory, num_steps)
+    # Temporary names renamed when complete: Ctrl-C while saving leaves no partial file. The
+    # figure is closed here, by its writer (demo_figure returns it open, as plotting does).
     try:
         with atomic_path(out / "demo.png") as tmp:
             fig.savefig(tmp, dpi=120, format="png")
@@ -102,8 +98,49 @@ def run_demo(num_runs: int = 10_000, num_steps: int = 100, seed: int = 0, out_di
 
         plt.close(fig)
     with atomic_path(out / "demo.json") as tmp:
-        tmp.write_text(json.dumps(rows, indent=2))
-    return {"rows": rows, "figure": str(out / "demo.png"), "table": str(out / "demo.json")}
+        tmp.write_text(json.dumps(json_document(rows), indent=2))
+    return {"rows": rows, "figure": str(out / "demo.png"), "table": str(out / "demo.json"),
+            "results": results, "theory": theory}
+
+
+def demo_figure(results: dict, theory: dict, num_steps: int):
+    """The demo's figure: position and velocity RMSE against √tr P, and NEES in its χ² band.
+
+    **Arguments:**
+
+    - ``results``: filter label → :class:`~jaxtrack.montecarlo.MonteCarloResult`.
+    - ``theory``: ``(label, "position" | "velocity")`` → ``(num_steps,)`` √tr P, m and m/s.
+    - ``num_steps``: steps per run (time axis ``SAMPLING_PERIOD × k``, s).
+
+    **Returns:** the matplotlib ``Figure`` (the caller saves and closes it).
+    """
+    from ..plotting import plot_monte_carlo
+
+    fig = plot_monte_carlo(
+        results,
+        rmse_components={"position": (0, 1), "velocity": (2, 3)},
+        theory_rmse=theory,
+        times=SAMPLING_PERIOD * np.arange(num_steps),
+        rmse_unit={"position": "m", "velocity": "m/s"},
+    )
+    fig.suptitle(f"2-D constant velocity, τ = {SAMPLING_PERIOD} s, q = {ACCEL_PSD} m²/s³, σ = {MEASUREMENT_STD} m")
+    return fig
+
+
+# Version of the JSON written by ``demo --json`` and into demo.json; raise it when a key changes
+# meaning or disappears (adding a key keeps it). The schema: jaxtrack/cli/schemas/demo.schema.json.
+SCHEMA_VERSION = 1
+
+
+def json_document(rows: list[dict]) -> dict:
+    """The ``demo --json`` document: ``{"schema_version": 1, "rows": rows}``.
+
+    **Arguments:** ``rows``: the table rows of :func:`run_demo` (one dict per filter).
+
+    **Returns:** the dict printed by ``jaxtrack demo --json`` and written to ``demo.json``; its
+    keys, types and units are in ``jaxtrack/cli/schemas/demo.schema.json``.
+    """
+    return {"schema_version": SCHEMA_VERSION, "rows": rows}
 
 
 def format_table(rows) -> str:

@@ -22,3 +22,22 @@ from ._schedules import (
     round_counts as round_counts,
     segment_exchange as segment_exchange,
 )
+
+__all__ = [
+    "ManeuverCompensation",
+    "PerStepDesign",
+    "allocate_rates",
+    "maneuver_period_change",
+    "per_step_design",
+    "NewtonResult",
+    "NotConvergedWarning",
+    "RelaxedDesign",
+    "SegmentProblem",
+    "exhaustive_counts",
+    "ho_reduction",
+    "local_search",
+    "newton_uniform_period",
+    "relaxed_segment_design",
+    "round_counts",
+    "segment_exchange",
+]

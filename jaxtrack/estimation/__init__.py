@@ -18,3 +18,17 @@ from ._observability import (
     Observability as Observability,
     observability as observability,
 )
+
+__all__ = [
+    "LinearEstimate",
+    "batch_estimate",
+    "least_squares_estimate",
+    "linear_estimator_matrix",
+    "minimum_norm_estimate",
+    "posterior_covariance",
+    "weighted_least_squares",
+    "ConstrainedSolution",
+    "equality_constrained_lsq",
+    "Observability",
+    "observability",
+]

@@ -22,3 +22,22 @@ from ._simulate import (
     simulate as simulate,
     simulate_step as simulate_step,
 )
+
+__all__ = [
+    "circular_error_probable",
+    "monte_carlo_map",
+    "Interval",
+    "chi2_mean_bounds",
+    "normalized_squared_error",
+    "time_averaged_rmse",
+    "time_averaged_rmse_ratio",
+    "MonteCarloResult",
+    "monte_carlo",
+    "monte_carlo_sweep",
+    "run_mesh",
+    "sweep_mesh",
+    "Trajectory",
+    "psd_sqrt",
+    "simulate",
+    "simulate_step",
+]

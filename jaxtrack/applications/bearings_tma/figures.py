@@ -9,6 +9,7 @@ from collections.abc import Sequence
 import jax
 import numpy as np
 
+from ...plotting import log_scale_y
 from .analysis import initial_range_sensitivity, los_velocity_variances
 from .estimators import normalized_pseudolinear_filter
 from .montecarlo import GeometryStudy
@@ -108,7 +109,8 @@ def figure_initial_range(key=None):
     axes[0].plot(t, s.slant_range / 1e3, "k", lw=2, label="true range")
     est = normalized_pseudolinear_filter(bm, s.observer_input, s.sample_period, AVERAGED_BEARING_STD, 10_000.0)
     b = initial_range_sensitivity(bm, est.gain, s.sample_period)
-    axes[1].semilogy(t, np.hypot(b[:, 0], b[:, 1]), "k.-", lw=1)
+    axes[1].plot(t, np.hypot(b[:, 0], b[:, 1]), "k.-", lw=1)
+    log_scale_y(axes[1])
     axes[0].set_ylabel("estimated range [km]")
     axes[1].set_ylabel("‖∂r̂_pos(k|k)/∂r̂_s(0)‖  (analytic b_k)")
     for ax in axes:
@@ -135,17 +137,21 @@ def figure_errors(study: GeometryStudy):
             lines.append((f"EKF r̂(0)={r0 / 1e3:g} km", study.ekf, j, "--", _COLORS.get(float(r0), None)))
     # From k = 1: at k = 0 the r̂(0) = 10 km start has zero range error, which a log axis cannot show.
     for label, st, j, ls, color in lines:
-        axes[0].semilogy(t[1:], st.rms_range[j, 1:], ls, color=color, lw=1.1, label=label)
-        axes[1].semilogy(t[1:], st.rms_course[j, 1:], ls, color=color, lw=1.1)
-        axes[2].semilogy(t[1:], st.rms_speed[j, 1:], ls, color=color, lw=1.1)
+        axes[0].plot(t[1:], st.rms_range[j, 1:], ls, color=color, lw=1.1, label=label)
+        axes[1].plot(t[1:], st.rms_course[j, 1:], ls, color=color, lw=1.1)
+        axes[2].plot(t[1:], st.rms_speed[j, 1:], ls, color=color, lw=1.1)
         axes[3].plot(t, st.mean_range[j], ls, color=color, lw=1.1)
+    # The r̂(0) = 0 PLKF estimates a zero velocity on leg 1, so its speed error there is zero to
+    # round-off (1e-16 m/s): log_scale_y leaves those values out instead of spanning 18 decades.
+    for ax in axes[:3]:
+        log_scale_y(ax)
     for ax, lab in zip(axes, ("rms range error [m]", "rms course error [deg]", "rms speed error [m/s]",
                               "mean range error (bias) [m]")):
         _legs(ax, s)
         ax.set_xlabel("time [s]")
         ax.set_ylabel(lab)
-        ax.grid(True, which="both", alpha=0.25)
     axes[3].set_yscale("symlog", linthresh=100)
+    axes[3].grid(True, which="both", alpha=0.25)
     axes[0].legend(fontsize=7)
     fig.suptitle(f"{study.name}, config {study.config}: Table 2 (PLKF) vs Appendix D EKF, {study.mc.num_runs} runs")
     return fig
@@ -163,16 +169,17 @@ def figure_consistency(studies: Sequence[GeometryStudy]):
         mc = st.mc
         for j, r0 in enumerate(np.asarray(mc.initial_ranges)):
             if r0 > 0:
-                ax.semilogy(t[1:], np.nanmean(np.asarray(mc.plkf_position_nees[:, j, 1:]), axis=0), "-",
-                            color=_COLORS.get(float(r0)), lw=1, label=f"PLKF r̂(0)={r0 / 1e3:g} km")
+                ax.plot(t[1:], np.nanmean(np.asarray(mc.plkf_position_nees[:, j, 1:]), axis=0), "-",
+                        color=_COLORS.get(float(r0)), lw=1, label=f"PLKF r̂(0)={r0 / 1e3:g} km")
         for j, r0 in enumerate(np.asarray(mc.ekf_initial_ranges)):
-            ax.semilogy(t[1:], np.nanmean(np.asarray(mc.ekf_position_nees[:, j, 1:]), axis=0), "--",
-                        color=_COLORS.get(float(r0)), lw=1, label=f"EKF r̂(0)={r0 / 1e3:g} km")
+            ax.plot(t[1:], np.nanmean(np.asarray(mc.ekf_position_nees[:, j, 1:]), axis=0), "--",
+                    color=_COLORS.get(float(r0)), lw=1, label=f"EKF r̂(0)={r0 / 1e3:g} km")
         lo, hi = chi2_mean_bounds(2, mc.num_runs)
         ax.axhspan(lo, hi, color="0.8", alpha=0.6, label="95% χ² bounds")
         _legs(ax, st.scenario)
         ax.set_xlabel("time [s]")
         ax.set_ylabel("average position NEES")
+        log_scale_y(ax)
         ax.set_title(f"{st.name}, config {st.config}, {mc.num_runs} runs")
         ax.grid(True, which="both", alpha=0.25)
     axes[0, 0].legend(fontsize=7)
@@ -188,8 +195,9 @@ def figure_velocity_variance():
     along, across = los_velocity_variances(s, est.cov)
     t = np.asarray(s.times)
     fig, ax = plt.subplots(figsize=(6.4, 4), constrained_layout=True)
-    ax.semilogy(t[1:], along[1:], ".-", label="along the line of sight")
-    ax.semilogy(t[1:], across[1:], ".-", label="across the line of sight")
+    ax.plot(t[1:], along[1:], ".-", label="along the line of sight")
+    ax.plot(t[1:], across[1:], ".-", label="across the line of sight")
+    log_scale_y(ax)
     _legs(ax, s)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("P_N velocity variance [1/s²]")

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...models import gyro_bias_position_response, horizontal_accel_bias_response, schuler_rates, vertical_accel_bias_response
+from ...plotting import log_scale_y
 from .analysis import CovarianceAnalysis, SingleLookAnalysis, rs1_covariance_analysis, single_look_analysis
 from .error_model import error_response
 from .experiments import RESPONSE_TIMES
@@ -21,7 +22,9 @@ def _label(ax, xlabel: str, ylabel: str, title: str | None = None, *, log: bool 
     if title is not None:
         ax.set_title(title)
     if log:
-        ax.set_yscale("log")
+        # Log only where the data span three 1-2-5 ticks: the RS-1 σ curves span less than a
+        # decade (7 to 47 m), where a log axis showed one tick label or none.
+        log = log_scale_y(ax)
     ax.grid(True, which="both" if log else "major", alpha=0.25)
     if legend:
         ax.legend(fontsize=8)
