@@ -33,6 +33,8 @@ TYPECHECKED = [
     "jaxtrack.montecarlo._cep",
     "jaxtrack.applications.bearings_tma",
     "jaxtrack.applications.ho_sensitivity",
+    "jaxtrack.learning._params",
+    "jaxtrack.learning._mle",
 ]
 if os.environ.get("JAXTRACK_TYPECHECK", "1") != "0":
     with install_import_hook(TYPECHECKED, "beartype.beartype"):

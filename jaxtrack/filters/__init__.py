@@ -33,7 +33,11 @@ from ._consider import (
     consider_gain as consider_gain,
     consider_model as consider_model,
 )
-from ._smoother import SmootherResult as SmootherResult, rts_smoother as rts_smoother
+from ._smoother import (
+    SmootherResult as SmootherResult,
+    lag_one_covariances as lag_one_covariances,
+    rts_smoother as rts_smoother,
+)
 from ._unscented import UnscentedKalmanFilter as UnscentedKalmanFilter
 from ._updates import (
     AbstractUpdateForm as AbstractUpdateForm,
@@ -79,6 +83,7 @@ __all__ = [
     "consider_model",
     "SmootherResult",
     "rts_smoother",
+    "lag_one_covariances",
     "UnscentedKalmanFilter",
     "AbstractUpdateForm",
     "Conditioned",

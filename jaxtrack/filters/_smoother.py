@@ -173,3 +173,32 @@ def rts_smoother(
         empty = jnp.zeros((0,) + filtered.filtered_cov.shape[1:], filtered.filtered_cov.dtype)
         return SmootherResult(filtered.filtered_mean, filtered.filtered_cov, empty, filtered, filtered.ok)
     return _rts_backward(model, filtered, throw)
+
+
+def lag_one_covariances(result: SmootherResult) -> Float[Array, "Tm1 n n"]:
+    r"""Lag-one smoothed cross-covariances ``Cov(x_{k+1}, x_k | z_{0:T-1}) = P_{k+1/T-1} G_kᵀ``.
+
+    .. math::
+
+        P_{k+1,k/N} = P_{k+1/N} G_kᵀ
+
+    (de Jong 1989, "Smoothing and interpolation with the state-space model", *JASA* 84: the
+    smoothed covariance of consecutive states from the RTS gain). It equals Shumway & Stoffer's
+    lag-one covariance smoother (1982; 2017, *Time Series Analysis and Its Applications*, 4th
+    ed., Property 6.3), started from ``P_{N,N-1/N} = (I − K_N H_N) Φ_N P_{N-1/N-1}``, but
+    needs no second backward pass:
+    ``x_k − x̂_{k/N} = (x_k − x̂_{k/k} − G_k(x_{k+1} − x̂_{k+1/k})) − G_k(x̂_{k+1/N} − x_{k+1})``, whose
+    first bracket is independent of ``x_{k+1}`` and of all measurements, so
+    ``Cov(x_k, x_{k+1} | Z) = G_k P_{k+1/N}``. It is what the EM M-step for ``F`` and ``Q`` needs
+    (:func:`jaxtrack.learning.fit_em`), as ``E[x_{k+1} x_kᵀ | Z] = P_{k+1,k/N} + x̂_{k+1/N} x̂_{k/N}ᵀ``.
+    With the pseudo-inverse gain (singular ``P_{k+1/k}``) it is exact as well (same argument).
+
+    **Arguments:**
+
+    - ``result``: a :class:`SmootherResult` of ``T`` steps from :func:`rts_smoother`.
+
+    **Returns:** ``(T-1, n, n)``: entry ``k`` is ``Cov(x_{k+1}, x_k | Z)`` in state units squared
+    (row: step ``k+1``, column: step ``k``); ``(0, n, n)`` when ``T = 1``.
+    """
+    # A pure function of the existing fields: P_{k+1/N} is smoothed_cov[1:], G_k smoother_gain.
+    return jnp.matmul(result.smoothed_cov[1:], jnp.swapaxes(result.smoother_gain, -1, -2))

@@ -3,10 +3,45 @@
 - ``_imm_fit``: IMM parameters (transition matrix, noise levels, turn rates) from measurements
   alone, by gradient ascent on the IMM measurement log-likelihood with optax (Brandenburger,
   Hoffmann & Charlish 2023): :func:`fit_imm`, its objective :func:`imm_log_likelihood`.
+- ``_params``: constrained parametrisations (:class:`PositiveScalar`, :class:`Bounded`,
+  :class:`SPDMatrix`, :class:`StochasticRows`) and the symmetric-gradient rule
+  (:func:`symmetric_grad`).
+- ``_mle``: :func:`fit`, maximum likelihood for any model and filter over many recorded runs, with
+  standard errors and confidence intervals from the observed information (:class:`MLEFit`).
+- ``_em``: :func:`fit_em`, expectation–maximisation (Shumway & Stoffer 1982) for
+  ``LinearGaussianModel`` (F, H, Q, R, prior; each optionally fixed; masks; many runs): :class:`EMFit`.
 """
 
+from ._em import EMFit as EMFit, fit_em as fit_em
 from ._imm_fit import (
     IMMFit as IMMFit,
     fit_imm as fit_imm,
     imm_log_likelihood as imm_log_likelihood,
 )
+from ._mle import MLEFit as MLEFit, fit as fit
+from ._params import (
+    AbstractParametrisation as AbstractParametrisation,
+    Bounded as Bounded,
+    PositiveScalar as PositiveScalar,
+    SPDMatrix as SPDMatrix,
+    StochasticRows as StochasticRows,
+    natural as natural,
+    symmetric_grad as symmetric_grad,
+)
+
+__all__ = [
+    "EMFit",
+    "fit_em",
+    "IMMFit",
+    "fit_imm",
+    "imm_log_likelihood",
+    "AbstractParametrisation",
+    "Bounded",
+    "MLEFit",
+    "PositiveScalar",
+    "SPDMatrix",
+    "StochasticRows",
+    "fit",
+    "natural",
+    "symmetric_grad",
+]

@@ -44,9 +44,10 @@ import numpy as np
 import optax
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 
-from .._validation import InputError, check_finite, check_shape, is_concrete
+from .._validation import InputError, check_finite
 from ..filters._base import FirstStep
 from ..filters._imm import InteractingMultipleModel, run_imm
+from ._runs import all_finite as _all_finite, prepare_runs, select as _select
 
 # Built once so that the default does not create new closures (and a recompilation) per call.
 _DEFAULT_OPTIMIZER = optax.adam(1e-2)
@@ -117,41 +118,7 @@ def _check_build_and_params(build, params) -> tuple[PyTree, InteractingMultipleM
 
 def _prepare_tracks(imm, measurements, mask) -> tuple[Array, Array]:
     """``measurements`` → ``(R, T, m)`` floats with missing entries 0, ``mask`` → ``(R, T, m)`` bools."""
-    m = imm.models[0].meas_dim
-    z = jnp.asarray(measurements)
-    if not jnp.issubdtype(z.dtype, jnp.floating):
-        z = z.astype(imm.transition_probs.dtype)
-    check_shape("measurements", z, [(None, m), (None, None, m)])
-    single = z.ndim == 2
-    if single:
-        z = z[None]
-    R, T, _ = z.shape
-    if R == 0 or T == 0:
-        raise InputError(
-            f"`measurements` must hold at least one track of at least one step; got shape {z.shape}."
-        )
-    if mask is None:
-        observed = jnp.ones(z.shape, bool)
-    else:
-        mk = jnp.asarray(mask)
-        if single:
-            check_shape("mask", mk, [(T,), (T, m)])
-            mk = mk[None]
-        else:
-            check_shape("mask", mk, [(R, T), (R, T, m)])
-        if mk.dtype != bool:
-            raise InputError(f"`mask` must be boolean (True = observed); got dtype {mk.dtype}.")
-        observed = jnp.broadcast_to(mk[..., None] if mk.ndim == 2 else mk, z.shape)
-    if is_concrete(z) and is_concrete(observed):
-        bad = np.asarray(observed) & ~np.isfinite(np.asarray(z))
-        if bad.any():
-            first = tuple(int(i) for i in np.argwhere(bad)[0])
-            raise InputError(
-                f"`measurements` has {int(bad.sum())} non-finite entries marked observed (first at "
-                f"(track, step, component) {first}); mark them missing with `mask`."
-            )
-    # Missing entries may hold anything: never let them into the arithmetic.
-    return jnp.where(observed, z, 0.0), observed
+    return prepare_runs(imm.models[0].meas_dim, imm.transition_probs.dtype, measurements, mask)
 
 
 def _check_first_step(first_step):
@@ -202,14 +169,6 @@ def imm_log_likelihood(
     params, imm = _check_build_and_params(build, params)
     z, observed = _prepare_tracks(imm, measurements, mask)
     return _total_log_likelihood(build, params, z, observed, first_step)
-
-
-def _all_finite(tree) -> Array:
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree)]))
-
-
-def _select(pred, a, b):
-    return jax.tree_util.tree_map(lambda x, y: jnp.where(pred, x, y), a, b)
 
 
 @eqx.filter_jit
