@@ -19,7 +19,7 @@ _request_x64()
 
 __version__ = "0.1.0"
 
-_SUBPACKAGES = ("filters", "models", "montecarlo", "covariance", "sensitivity", "learning")
+_SUBPACKAGES = ("filters", "models", "montecarlo", "covariance", "sensitivity", "learning", "bounds")
 __all__ = [*_SUBPACKAGES, "InputError", "__version__"]
 
 

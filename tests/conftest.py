@@ -31,6 +31,7 @@ TYPECHECKED = [
     "jaxtrack.estimation",
     "jaxtrack.montecarlo._metrics",
     "jaxtrack.montecarlo._cep",
+    "jaxtrack.bounds._pcrlb",
     "jaxtrack.applications.bearings_tma",
     "jaxtrack.applications.ho_sensitivity",
     "jaxtrack.learning._params",

@@ -32,6 +32,7 @@ PUBLIC_MODULES = (
     "estimation",
     "geometry",
     "learning",
+    "bounds",
     "plotting",
 )
 # Names of the top-level ``jaxtrack.__all__`` that are documented objects (the rest are the
