@@ -31,6 +31,7 @@ class Trajectory(NamedTuple):
     detected: Bool[Array, " T"]
 
 
+@jax.custom_jvp
 def psd_sqrt(cov: Array) -> Array:
     """A factor ``L`` with ``L Lᵀ = cov`` for a positive *semi*definite ``cov``.
 
@@ -42,9 +43,43 @@ def psd_sqrt(cov: Array) -> Array:
     - ``cov``: a symmetric positive semidefinite matrix, ``(..., n, n)`` (leading axes batch).
 
     **Returns:** ``L``, shape ``(..., n, n)``, in the square root of ``cov``'s units.
+
+    **Derivative** (a custom JVP): where the eigenvalues are distinct it is the exact derivative
+    of ``L = V √Λ``. Where they repeat (``Q₁ ⊗ I`` of every kinematic model repeats each one), the
+    eigenvectors are not unique and JAX's ``eigh`` derivative divides by ``λ_i − λ_j = 0`` (NaN);
+    inside each repeated eigenspace the basis is then held fixed and the root differentiated
+    (``S dS + dS S = dcov`` for ``S = cov^{1/2}``). With ``A = Vᵀ dcov V``: ``dL = V K`` with
+    ``K_ij = A_ij √λ_j / (λ_j − λ_i)`` for distinct and ``K_ij = A_ij / (√λ_i + √λ_j)`` for equal
+    eigenvalues (``i = j`` included: ``dλ_i / (2√λ_i)``), so that ``d(L Lᵀ) = dcov`` in both cases.
+    Pairs of zero eigenvalues (a singular ``cov``, where the root is not differentiable) get 0.
+    Why it is the right gradient for Monte Carlo: with repeated eigenvalues the factor, and so a
+    simulated path for a fixed key, jumps when the computed basis rotates (finite differences with
+    common random numbers are then meaningless), while ``S V ε`` with ``V`` held fixed has the
+    law ``N(0, cov)`` for every ``cov``: this derivative is the pathwise (reparametrisation)
+    gradient of the expectation. The value is computed as before, bit for bit: draws do not change.
     """
     eigvals, eigvecs = jnp.linalg.eigh(cov)
     return eigvecs * jnp.sqrt(jnp.clip(eigvals, 0.0))[..., None, :]
+
+
+@psd_sqrt.defjvp
+def _psd_sqrt_jvp(primals, tangents):
+    (cov,), (dcov,) = primals, tangents
+    eigvals, eigvecs = jnp.linalg.eigh(cov)
+    lam = jnp.clip(eigvals, 0.0)
+    root = jnp.sqrt(lam)
+    factor = eigvecs * root[..., None, :]
+    # eigh reads one triangle: the tangent of a symmetric input is its symmetric part.
+    dsym = 0.5 * (dcov + jnp.swapaxes(dcov, -1, -2))
+    a = jnp.swapaxes(eigvecs, -1, -2) @ dsym @ eigvecs
+    gap = lam[..., None, :] - lam[..., :, None]  # λ_j − λ_i
+    scale = jnp.max(lam, axis=-1, keepdims=True)[..., None]
+    # "equal" up to rounding of the eigensolver (relative to the largest eigenvalue)
+    equal = jnp.abs(gap) <= 1e3 * jnp.finfo(lam.dtype).eps * scale
+    den_equal = root[..., :, None] + root[..., None, :]
+    k_equal = jnp.where(den_equal > 0, a / jnp.where(den_equal > 0, den_equal, 1.0), 0.0)
+    k_distinct = a * root[..., None, :] / jnp.where(equal, 1.0, gap)
+    return factor, eigvecs @ jnp.where(equal, k_equal, k_distinct)
 
 
 class NoiseFactors(NamedTuple):
