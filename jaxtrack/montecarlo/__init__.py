@@ -3,6 +3,7 @@ on one device or sharded over devices and hosts."""
 
 from ._cep import circular_error_probable as circular_error_probable
 from ._engine import monte_carlo_map as monte_carlo_map
+from ._differentiable import differentiable_monte_carlo as differentiable_monte_carlo
 from ._metrics import (
     Interval as Interval,
     chi2_mean_bounds as chi2_mean_bounds,
@@ -40,4 +41,5 @@ __all__ = [
     "psd_sqrt",
     "simulate",
     "simulate_step",
+    "differentiable_monte_carlo",
 ]
