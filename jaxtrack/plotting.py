@@ -27,6 +27,7 @@ def plot_monte_carlo(
     times: np.ndarray | None = None,
     time_unit: str = "s",
     rmse_unit: dict[str, str] | None = None,
+    bound=None,
 ):
     """RMSE per step and run-averaged NEES against its χ² bounds, one line per filter.
 
@@ -39,6 +40,11 @@ def plot_monte_carlo(
       title.
     - ``times``: ``(T,)`` time axis (default: step index); ``time_unit`` its label.
     - ``rmse_unit``: panel title → unit string for the y label.
+    - ``bound``: an optional :class:`~jaxtrack.bounds.PosteriorCRB` over the same steps: its RMSE
+      bound (:meth:`~jaxtrack.bounds.PosteriorCRB.rmse_bound` of each panel's components, which
+      must then be given and index the bound's state) is drawn dotted in black, and each label
+      gains the estimator's efficiency at the last step, RMSE / bound
+      (:func:`~jaxtrack.bounds.efficiency`; ≥ 1 up to Monte Carlo error).
 
     **Returns:** the matplotlib ``Figure`` (the caller saves or shows it).
     """
@@ -50,8 +56,14 @@ def plot_monte_carlo(
     panels = len(rmse_components) + 1
     fig, axes = plt.subplots(1, panels, figsize=(4.6 * panels, 3.8), constrained_layout=True)
     for ax, (title, comps) in zip(axes, rmse_components.items()):
+        floor = None
+        if bound is not None and comps is not None:
+            floor = np.asarray(bound.rmse_bound(tuple(comps)))
+            ax.plot(t, floor, ":", color="k", lw=1.4, zorder=3, label="PCRLB (RMSE bound)")
         for label, res in results.items():
-            (line,) = ax.plot(t, np.asarray(res.rmse(None if comps is None else tuple(comps))), label=label)
+            rmse = np.asarray(res.rmse(None if comps is None else tuple(comps)))
+            shown = label if floor is None else f"{label} (RMSE/bound {rmse[-1] / floor[-1]:.2f} at end)"
+            (line,) = ax.plot(t, rmse, label=shown)
             if theory_rmse and (label, title) in theory_rmse:
                 ax.plot(t, theory_rmse[(label, title)], "--", color=line.get_color(), lw=1,
                         label=f"{label}: filter's √tr P")

@@ -180,3 +180,28 @@ def test_importing_plotting_and_figures_keeps_the_users_backend():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.split() == ["svg", "0"]
+
+
+def test_monte_carlo_figure_draws_the_pcrlb_and_the_efficiency():
+    """A Kalman filter on its own linear model is efficient: the PCRLB curve equals its RMSE
+    bound and the legend's RMSE/bound is 1 within Monte Carlo error (400 runs: the RMSE's
+    relative standard error is about 1/sqrt(2·400·2) = 1.8 %, so within 10 %)."""
+    from jaxtrack.bounds import pcrlb
+    from jaxtrack.models import constant_velocity
+    from jaxtrack.montecarlo import monte_carlo
+    from jaxtrack.plotting import plot_monte_carlo
+
+    model = constant_velocity(1.0, dim=2, accel_psd=0.5, measurement_std=10.0,
+                              initial_cov=np.diag([100.0, 100.0, 25.0, 25.0]))
+    res = monte_carlo(model, jax.random.key(0), 400, num_steps=30, progress=False)
+    crb = pcrlb(model, jax.random.key(1), 1, 30)
+    fig = plot_monte_carlo({"KF": res}, rmse_components={"position": (0, 1)}, bound=crb)
+    try:
+        ax = fig.axes[0]
+        (floor,) = [ln for ln in ax.get_lines() if ln.get_label() == "PCRLB (RMSE bound)"]
+        np.testing.assert_allclose(floor.get_ydata(), np.asarray(crb.rmse_bound((0, 1))), rtol=1e-12)
+        (kf,) = [ln for ln in ax.get_lines() if ln.get_label().startswith("KF (RMSE/bound ")]
+        ratio = float(kf.get_label().split("RMSE/bound ")[1].split()[0])
+        assert abs(ratio - 1.0) < 0.1, ratio
+    finally:
+        plt.close(fig)
