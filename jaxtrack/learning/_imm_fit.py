@@ -47,7 +47,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 from .._validation import InputError, check_finite
 from ..filters._base import FirstStep
 from ..filters._imm import InteractingMultipleModel, run_imm
-from ._runs import all_finite as _all_finite, prepare_runs, select as _select
+from ._runs import all_finite as _all_finite, check_params, prepare_runs, select as _select
 
 # Built once so that the default does not create new closures (and a recompilation) per call.
 _DEFAULT_OPTIMIZER = optax.adam(1e-2)
@@ -94,20 +94,7 @@ def _check_build_and_params(build, params) -> tuple[PyTree, InteractingMultipleM
         raise InputError(
             f"`build` must be a callable params -> InteractingMultipleModel; got {type(build).__name__}."
         )
-    leaves, treedef = jax.tree_util.tree_flatten(params)
-    if not leaves:
-        raise InputError("`params` must be a pytree with at least one float array leaf; got no leaves.")
-    out = []
-    for i, leaf in enumerate(leaves):
-        a = jnp.asarray(leaf)
-        if not jnp.issubdtype(a.dtype, jnp.floating):
-            raise InputError(
-                f"`params` leaves must be float arrays (unconstrained reals: logits, log noise "
-                f"levels, …); leaf {i} has dtype {a.dtype}."
-            )
-        check_finite("params", a)
-        out.append(a)
-    params = jax.tree_util.tree_unflatten(treedef, out)
+    params = check_params(params, ": logits, log noise levels, …")
     imm = build(params)
     if not isinstance(imm, InteractingMultipleModel):
         raise InputError(

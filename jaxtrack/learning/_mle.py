@@ -58,7 +58,7 @@ from ..filters._base import AbstractFilter, FirstStep, check_run_arguments, run_
 from ..filters._kalman import KalmanFilter
 from ..models import AbstractStateSpaceModel
 from ._params import AbstractParametrisation, natural
-from ._runs import all_finite, prepare_runs, select
+from ._runs import all_finite, check_params, prepare_runs, select
 
 # Built once so that the default does not create new closures (and a recompilation) per call.
 # L-BFGS (memory 10) with optax's zoom line search (strong Wolfe conditions).
@@ -328,19 +328,7 @@ class MLEFit(eqx.Module):
 
 
 def _check_params(params) -> PyTree:
-    leaves, treedef = jax.tree_util.tree_flatten(params)
-    if not leaves:
-        raise InputError("`params` must be a pytree with at least one float array leaf; got no leaves.")
-    out = []
-    for i, leaf in enumerate(leaves):
-        a = jnp.asarray(leaf)
-        if not jnp.issubdtype(a.dtype, jnp.floating):
-            raise InputError(
-                f"`params` leaves must be float arrays (unconstrained reals); leaf {i} has dtype {a.dtype}."
-            )
-        check_finite("params", a)
-        out.append(a)
-    return jax.tree_util.tree_unflatten(treedef, out)
+    return check_params(params)
 
 
 def fit(

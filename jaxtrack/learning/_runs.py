@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from .._validation import InputError, check_shape, is_concrete
+from .._validation import InputError, check_finite, check_shape, is_concrete
 
 
 def prepare_runs(meas_dim: int, dtype, measurements: ArrayLike, mask: ArrayLike | None) -> tuple[Array, Array]:
@@ -70,3 +70,27 @@ def all_finite(tree) -> Array:
 def select(pred, a, b):
     """``a`` where the scalar ``pred`` is True, else ``b``, leaf by leaf (same structures)."""
     return jax.tree_util.tree_map(lambda x, y: jnp.where(pred, x, y), a, b)
+
+
+def check_params(params, examples: str = ""):
+    """``params`` with every leaf a finite float array (the unconstrained reals a fit moves).
+
+    **Arguments:** ``params``: a pytree; ``examples``: words appended to the error's description
+    of the leaves (e.g. ``": logits, log noise levels, …"``).
+
+    **Returns:** the pytree with ``jnp`` array leaves. **Raises:** :class:`~jaxtrack.InputError`
+    naming ``params`` for no leaves, a non-float leaf or a non-finite one.
+    """
+    leaves, treedef = jax.tree_util.tree_flatten(params)
+    if not leaves:
+        raise InputError("`params` must be a pytree with at least one float array leaf; got no leaves.")
+    out = []
+    for i, leaf in enumerate(leaves):
+        a = jnp.asarray(leaf)
+        if not jnp.issubdtype(a.dtype, jnp.floating):
+            raise InputError(
+                f"`params` leaves must be float arrays (unconstrained reals{examples}); leaf {i} has dtype {a.dtype}."
+            )
+        check_finite("params", a)
+        out.append(a)
+    return jax.tree_util.tree_unflatten(treedef, out)
