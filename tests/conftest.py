@@ -32,6 +32,7 @@ TYPECHECKED = [
     "jaxtrack.montecarlo._metrics",
     "jaxtrack.montecarlo._cep",
     "jaxtrack.bounds._pcrlb",
+    "jaxtrack.design._observer",
     "jaxtrack.applications.bearings_tma",
     "jaxtrack.applications.ho_sensitivity",
     "jaxtrack.learning._params",

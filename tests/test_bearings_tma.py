@@ -675,8 +675,14 @@ def test_bad_input_raises(r1):
         bt.stacked_measurement_matrix(jnp.zeros((5, 4)), 20.0, 6)
 
 
-def test_reproduce_rows_all_pass_and_figures(tmp_path):
+def test_reproduce_rows_all_pass_and_figures(tmp_path, capsys):
     rows, figures = bt.reproduce(tmp_path)
+    # the extra (not in the paper) PCRLB output: a figure and a table file, the table on stderr only
+    # (stdout carries `jaxtrack reproduce tma --json`'s document)
+    out, err = capsys.readouterr()
+    assert "PCRLB" not in out and "PCRLB" in err
+    assert (tmp_path / "extra_pcrlb_vs_rmse.png").stat().st_size > 10_000
+    assert "PCRLB" in (tmp_path / "extra_pcrlb_vs_rmse.txt").read_text()
     ids = {r.id for r in rows}
     assert {"V2", "V3", "V10", "V19", "V21", "V22", "V23", "V24", "V25", "V26", "V27", "V28", "V29", "V31"} <= ids
     failed = [r for r in rows if not r.ok]

@@ -1,7 +1,21 @@
 """Sampling-schedule design (Ho 1968, Sec. III): Newton, segment exchange, gradient schedules with
 optax (:mod:`._schedules`); per-step periods, real-time rate allocation and maneuver compensation
-(:mod:`._rates`)."""
+(:mod:`._rates`); designs by gradient on a differentiable Monte Carlo objective next to the same design
+on the actual covariance (:mod:`._mc_design`); bearings-only observer trajectories designed by gradient
+on the posterior Cramér–Rao bound (:mod:`._observer`)."""
 
+from ._mc_design import (
+    GradientDesign as GradientDesign,
+    design_by_covariance as design_by_covariance,
+    design_by_monte_carlo as design_by_monte_carlo,
+)
+from ._observer import (
+    ObserverDesign as ObserverDesign,
+    bearing_position_bound as bearing_position_bound,
+    constrained_turn_rates as constrained_turn_rates,
+    design_observer_path as design_observer_path,
+    observer_states as observer_states,
+)
 from ._rates import (
     ManeuverCompensation as ManeuverCompensation,
     PerStepDesign as PerStepDesign,
@@ -40,4 +54,12 @@ __all__ = [
     "relaxed_segment_design",
     "round_counts",
     "segment_exchange",
+    "GradientDesign",
+    "design_by_covariance",
+    "design_by_monte_carlo",
+    "ObserverDesign",
+    "bearing_position_bound",
+    "constrained_turn_rates",
+    "design_observer_path",
+    "observer_states",
 ]

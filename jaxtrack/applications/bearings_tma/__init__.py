@@ -59,6 +59,7 @@ from .estimators import (
 )
 from .figures import (
     figure_consistency as figure_consistency,
+    figure_bounds as figure_bounds,
     figure_errors as figure_errors,
     figure_first_leg as figure_first_leg,
     figure_initial_range as figure_initial_range,

@@ -206,3 +206,31 @@ def figure_velocity_variance():
     ax.legend(fontsize=8)
     return fig
 
+
+
+def figure_bounds(comparisons):
+    """Extra (not in the report): the PCRLB's RMSE bound next to the EKF's and the PLKF's Monte Carlo
+    position RMSE (truths drawn from the bound's prior, :mod:`.bounds`), one panel per geometry."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(comparisons), figsize=(5.2 * len(comparisons), 4), constrained_layout=True,
+                             squeeze=False)
+    for ax, c in zip(axes[0], comparisons):
+        t = np.asarray(c.times)
+        ax.plot(t, np.sqrt(np.asarray(c.position_bound)), "k", lw=2, label="PCRLB (√ trace of position block)")
+        for mse, se, color, label in ((c.ekf_mse, c.ekf_se_mean, "C1", "EKF"), (c.plkf_mse, c.plkf_se_mean, "C0",
+                                                                                  "PLKF (Table 2)")):
+            mse, se = np.asarray(mse), np.asarray(se)
+            rmse = np.sqrt(mse)
+            half = se / rmse  # 2 s.e. of the RMSE (delta method): 2 · se / (2 √mse)
+            ax.plot(t, rmse, color=color, lw=1.2, label=f"{label} RMSE")
+            ax.fill_between(t, rmse - half, rmse + half, color=color, alpha=0.25, lw=0)
+        log_scale_y(ax)
+        _legs(ax, geometry(c.name))
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("position RMSE [m]")
+        ax.set_title(f"{c.name}: {c.num_runs} runs, r̂(0) = 10 km", fontsize=10)
+        ax.grid(True, which="both", alpha=0.25)
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("extra (not in the paper): PCRLB vs Monte Carlo RMSE (truths from the prior)")
+    return fig

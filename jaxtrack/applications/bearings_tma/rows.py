@@ -9,6 +9,8 @@ writes them with the figures (``jaxtrack reproduce tma``).
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -17,7 +19,7 @@ import numpy as np
 from ...estimation import observability
 from ...geometry import bearing, course
 from ...models import pseudolinear_measurement_row as measurement_row, wrap_angle
-from .._report import PaperRow, printed_rtol, write_figures
+from .._report import PaperRow, atomic_path, printed_rtol, write_figures
 from .analysis import los_velocity_variances, sample_index, stacked_measurement_matrix
 from .estimators import bearing_ekf, ekf_prior, normalized_pseudolinear_filter, track_solution
 from .figures import (
@@ -233,4 +235,21 @@ def reproduce(out_dir, num_runs: int = DEFAULT_RUNS) -> tuple[list[PaperRow], li
         ("fig08_errors_g3.png", lambda: figure_errors(studies["R3-A"])),
         ("consistency.png", lambda: figure_consistency([studies["R1-A"], studies["R2-A"]])),
     ], dpi=110)
+    _extra_bounds(out_dir, num_runs)
     return rows, figures
+
+
+def _extra_bounds(out_dir, num_runs: int) -> None:
+    """Extra output, not in the paper (issue 21): the PCRLB vs the EKF's and PLKF's Monte Carlo RMSE per
+    geometry — a printed table and ``extra_pcrlb_vs_rmse.png`` (not among the returned paper figures)."""
+    from .bounds import bound_comparison, bound_table
+    from .figures import figure_bounds
+
+    keys = jax.random.split(jax.random.key(21), 3)
+    comparisons = [bound_comparison(name, k, num_runs) for name, k in zip(("R1", "R2", "R3"), keys)]
+    table = bound_table(comparisons)
+    # stderr and a file, not stdout: `jaxtrack reproduce tma --json` prints only its JSON document there.
+    print(table, file=sys.stderr)
+    with atomic_path(Path(out_dir) / "extra_pcrlb_vs_rmse.txt") as tmp:
+        tmp.write_text(table + "\n")
+    write_figures(out_dir, [("extra_pcrlb_vs_rmse.png", lambda: figure_bounds(comparisons))], dpi=110)
