@@ -38,7 +38,7 @@ from ..filters._batch import CovarianceMode
 from ..models import AbstractStateSpaceModel
 from ._engine import add_totals, block_size_for
 from ._metrics import chi2_mean_bounds
-from ._result import MonteCarloResult, _key_fields, _precision_suspect, _Sums, _zero_sums
+from ._result import MonteCarloResult, _key_fields, _precision_suspect, _run_averages, _Sums, _zero_sums
 from ._run import _block_delta, _Common, _Models, _prepare, _shared_setup
 
 __all__ = ["differentiable_monte_carlo"]
@@ -96,14 +96,12 @@ def _summarize_traced(sums: _Sums, n, num_runs, confidence, shared, components, 
     num_ok = sums.num_ok
     dtype = sums.nees.dtype
     T = sums.nees.shape[0]
-    mean_nees = sums.nees / num_ok
-    nees_var = jnp.maximum(sums.nees_sq / num_ok - mean_nees**2, 0.0)
-    nis_dof = sums.nis_dof / num_ok
+    averages = _run_averages(sums, num_ok, n)
+    anees = averages["anees"]
     shapes = (jax.ShapeDtypeStruct((T, 2), dtype), jax.ShapeDtypeStruct((T, 2), dtype))
     nees_b, nis_b = jax.pure_callback(
         lambda k, d: _bounds_host(k, d, n, confidence, T), shapes,
         jax.lax.stop_gradient(num_ok), jax.lax.stop_gradient(sums.nis_dof), vmap_method="sequential")
-    anees = jnp.mean(mean_nees) / n
     concrete = is_concrete(num_ok) and is_concrete(sums.nees)
     if concrete:
         num_ok_int, num_failed = int(num_ok), int(sums.num_failed)
@@ -114,24 +112,16 @@ def _summarize_traced(sums: _Sums, n, num_runs, confidence, shared, components, 
     else:
         num_ok_int, num_failed, suspect = num_runs, 0, False
         jax.debug.callback(_warn_failed, sums.num_failed, sums.num_failed + num_ok)
-    # (n − 1 denominator of the empirical NEES spread, as _summarize.)
     return MonteCarloResult(
-        mse=sums.squared_error / num_ok,
-        mean_error=sums.error / num_ok,
-        nees=mean_nees,
-        nees_std=jnp.sqrt(nees_var * num_ok / jnp.maximum(num_ok - 1, 1)),
+        **averages,
         nees_bounds=nees_b,
-        nis=sums.nis / num_ok,
-        nis_dof=nis_dof,
         nis_bounds=nis_b,
-        anees=anees,
         anees_bounds=nees_b[0] / n,
         num_runs=num_ok_int,
         num_failed=num_failed,
         confidence=confidence,
         shared_covariance=shared,
         precision_warning=suspect,
-        mode_probs=sums.mode_probs / num_ok if sums.mode_probs.shape[-1] else None,
         components=components,
         **_key_fields(key),
     )

@@ -149,6 +149,25 @@ def _precision_suspect(dtype, anees, anees_hi, nis, nis_hi) -> bool:
                 or (mean_nis_hi > 0 and mean_nis > PRECISION_MARGIN * mean_nis_hi))
 
 
+def _run_averages(sums: _Sums, num_ok, n) -> dict:
+    """The per-step run averages of a :class:`MonteCarloResult` from the summed statistics over
+    ``num_ok`` finite runs (a Python int, or a traced count in
+    :func:`~jaxtrack.montecarlo.differentiable_monte_carlo`): one set of formulas for both."""
+    mean_nees = sums.nees / num_ok
+    nees_var = jnp.maximum(sums.nees_sq / num_ok - mean_nees**2, 0.0)
+    return dict(
+        mse=sums.squared_error / num_ok,
+        mean_error=sums.error / num_ok,
+        nees=mean_nees,
+        # n − 1 denominator of the empirical spread (1 for a single run)
+        nees_std=jnp.sqrt(nees_var * num_ok / jnp.maximum(num_ok - 1, 1)),
+        nis=sums.nis / num_ok,
+        nis_dof=sums.nis_dof / num_ok,
+        anees=jnp.mean(mean_nees) / n,
+        mode_probs=sums.mode_probs / num_ok if sums.mode_probs.shape[-1] else None,
+    )
+
+
 def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=None, key_impl=None) -> MonteCarloResult:
     num_ok = int(sums.num_ok)
     num_failed = int(sums.num_failed)
@@ -161,16 +180,14 @@ def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=No
         )
     if num_ok == 0:
         raise FloatingPointError("jaxtrack.monte_carlo: every run produced a non-finite estimate.")
-    mean_nees = sums.nees / num_ok
-    nees_var = jnp.maximum(sums.nees_sq / num_ok - mean_nees**2, 0.0)
+    averages = _run_averages(sums, num_ok, n)
+    mean_nees, anees = averages["nees"], averages["anees"]
     # Run i's NIS at step k is χ²(d_ik) (its observed components); the runs are independent, so
     # the sum over runs is χ²(D_k), D_k = Σ_i d_ik, and the run average lies in
     # [χ²_{D_k}⁻¹(α/2), χ²_{D_k}⁻¹(1 − α/2)] / M: chi2_mean_bounds of D_k for one "run", over M.
     # With one schedule for all runs D_k = M·d_k and this is chi2_mean_bounds(d_k, M) exactly.
-    nis_dof = sums.nis_dof / num_ok
     nees_b = chi2_mean_bounds(np.full(mean_nees.shape, n), num_ok, confidence)
     nis_b = chi2_mean_bounds(np.asarray(sums.nis_dof), 1, confidence) / num_ok
-    anees = jnp.mean(mean_nees) / n
     suspect = _precision_suspect(sums.nees.dtype, anees, nees_b[0][1] / n, sums.nis / num_ok, nis_b[:, 1])
     if suspect:
         warnings.warn(
@@ -182,22 +199,15 @@ def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=No
             stacklevel=3,
         )
     return MonteCarloResult(
-        mse=sums.squared_error / num_ok,
-        mean_error=sums.error / num_ok,
-        nees=mean_nees,
-        nees_std=jnp.sqrt(nees_var * num_ok / max(num_ok - 1, 1)),
+        **averages,
         nees_bounds=jnp.asarray(nees_b),
-        nis=sums.nis / num_ok,
-        nis_dof=nis_dof,
         nis_bounds=jnp.asarray(nis_b),
-        anees=anees,
         anees_bounds=jnp.asarray(nees_b[0] / n),
         num_runs=num_ok,
         num_failed=num_failed,
         confidence=confidence,
         shared_covariance=shared,
         precision_warning=suspect,
-        mode_probs=sums.mode_probs / num_ok if sums.mode_probs.shape[-1] else None,
         components=components,
         key=key,
         key_impl=key_impl,
