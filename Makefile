@@ -2,15 +2,19 @@
 #   make run    — set up .venv from pyproject.toml and reproduce every study (tables; PNGs in results/)
 #   make demo   — the 10,000-run Monte Carlo demo (results/demo)
 #   make test   — set up .venv from pyproject.toml and run the test suite
-# Everything is installed from the project's own files into ./.venv; nothing by hand.
+# Everything is installed from the project's own files into ./.venv; nothing by hand: the
+# packages of pyproject.toml at the exact versions of requirements.lock (pip constraints), so a
+# fresh clone gets the versions the suite passed with. `make lock` refreshes the lock file.
 
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PYTEST_ARGS ?=
+LOCK   := requirements.lock
+EXTRAS := test,notebooks,docs,export
 
-.PHONY: install run demo test test-slow clean docs
+.PHONY: install run demo test test-slow clean docs lock test-oracle-versions
 
 # jaxtrack needs Python >= 3.11 (pyproject's requires-python). Checked before anything is made,
 # with a message that says which interpreter was found and how to pick another.
@@ -19,7 +23,7 @@ PY_OK := import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)
 # A venv is reused only if a previous install finished (the stamp). Without the stamp it may be
 # half made (an older Python, no pip because python3-venv is missing, an interrupted install):
 # it is then removed and made again, so a failed attempt never needs `make clean`.
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(LOCK)
 	@$(PYTHON) -c '$(PY_OK)' 2>/dev/null || { \
 	  echo "jaxtrack needs Python >= 3.11, but PYTHON=$(PYTHON) is: $$($(PYTHON) --version 2>&1 || echo 'not found')." >&2; \
 	  echo "Install Python 3.11+ (with its venv module, e.g. Debian's python3-venv) and run: make PYTHON=python3.11 $(MAKECMDGOALS)" >&2; \
@@ -29,9 +33,26 @@ $(STAMP): pyproject.toml
 	  rm -rf $(VENV); \
 	fi
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,notebooks,docs,export]"
+	$(BIN)/python -m pip install --quiet --upgrade pip -c $(LOCK)
+	$(BIN)/python -m pip install --quiet -c $(LOCK) -e ".[$(EXTRAS)]"
 	touch $(STAMP)
+
+# Refresh requirements.lock: resolve pyproject.toml's ranges afresh (newest versions the index
+# serves, in a throw-away venv), then freeze every installed distribution. Run `make test` after
+# it and commit the lock only if the suite passes; the bench extra is locked too.
+LOCK_VENV := .lock-venv
+lock:
+	@$(PYTHON) -c '$(PY_OK)' || { echo "make lock needs Python >= 3.11 (PYTHON=$(PYTHON))" >&2; exit 1; }
+	rm -rf $(LOCK_VENV)
+	$(PYTHON) -m venv $(LOCK_VENV)
+	$(LOCK_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(LOCK_VENV)/bin/python -m pip install --quiet -e ".[$(EXTRAS),bench]"
+	{ echo "# Exact versions the test suite passed with: pip constraints for make install (pyproject.toml"; \
+	  echo "# keeps the compatible ranges for library users). Made by 'make lock' with Python $$($(LOCK_VENV)/bin/python -c 'import platform; print(platform.python_version(), platform.system(), platform.machine())')."; \
+	  $(LOCK_VENV)/bin/python -m pip freeze --all --exclude-editable | grep -v '^jaxtrack'; } > $(LOCK).tmp
+	mv $(LOCK).tmp $(LOCK)
+	rm -rf $(LOCK_VENV)
+	@echo "wrote $(LOCK); now run make test before committing it"
 
 install: $(STAMP)
 
@@ -41,28 +62,40 @@ run: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/jaxtrack demo --out results/demo
 
-# The suite runs in four pytest processes: the fault-injection cases (which run JAX in worker
-# threads, some ending in runtime errors raised from XLA callbacks) and the property tests (many
-# compilations) each get a fresh process, and the rest is split in two by file name. XLA's CPU
-# compiler has crashed (SIGSEGV inside backend_compile) twice late in a long single process
-# (after ~500 tests, in an unremarkable compilation; not reproducible alone), so no process is
-# left to accumulate the whole suite's compilations; tests/conftest.py also clears JAX's caches
-# after each test module.
+# The suite runs as three pytest sessions, each on two worker processes (pytest-xdist, one per
+# core; XDIST= runs them in one process each): the two halves of the suite by file name, then the
+# fault-injection cases (JAX in worker threads, some ending in runtime errors raised from XLA
+# callbacks) with the property tests (many compilations). Each test module is one work unit of a
+# worker, longest first (tests/conftest.py). XLA's CPU compiler has crashed (SIGSEGV inside
+# backend_compile) twice late in a long single process (after ~500 tests, in an unremarkable
+# compilation; not reproducible alone), so no worker is left to accumulate the whole suite's
+# compilations (about 250 tests each here); tests/conftest.py also clears JAX's in-memory caches
+# after each test module, and JAX's persistent compilation cache (.cache/jax, empty in a fresh
+# clone) lets a program compiled once in the run be loaded, not compiled, wherever it recurs.
 ISOLATED := tests/test_faults.py tests/test_properties.py
 FIRST    := $(filter-out $(ISOLATED),$(sort $(wildcard tests/test_[a-m]*.py)))
 SECOND   := $(filter-out $(ISOLATED) $(FIRST),$(sort $(wildcard tests/test_*.py)))
+XDIST    ?= -n 2 --dist loadgroup
 
 test: $(STAMP)
-	$(BIN)/pytest $(PYTEST_ARGS) $(FIRST)
-	$(BIN)/pytest $(PYTEST_ARGS) $(SECOND)
-	$(BIN)/pytest $(PYTEST_ARGS) tests/test_faults.py
-	$(BIN)/pytest $(PYTEST_ARGS) tests/test_properties.py
+	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(FIRST)
+	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(SECOND)
+	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
 	$(MAKE) docs
 
 test-slow: $(STAMP)
-	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(FIRST)
-	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(SECOND)
-	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(ISOLATED)
+	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(FIRST)
+	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(SECOND)
+	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
+
+# statsmodels, the MLE oracle, on its 0.14 line as well as the locked version: installs 0.14.x
+# into a throw-away folder ahead of the venv's packages and runs the statsmodels comparison.
+test-oracle-versions: $(STAMP)
+	rm -rf .oracle-014
+	$(BIN)/python -m pip install --quiet --no-deps --target .oracle-014 "statsmodels>=0.14,<0.15"
+	PYTHONPATH=.oracle-014 $(BIN)/pytest -p no:cacheprovider -k statsmodels tests/test_learning_mle.py
+	$(BIN)/pytest -p no:cacheprovider -k statsmodels tests/test_learning_mle.py
+	rm -rf .oracle-014
 
 # The documentation site (mkdocs.yml), built offline and strictly into build/site. The gallery
 # renders the executed notebooks in docs/gallery/, which tests/test_notebooks.py writes; only a

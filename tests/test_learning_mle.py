@@ -61,22 +61,31 @@ def test_estimates_and_standard_errors_match_statsmodels(name):
     ll = run_filter(KalmanFilter(), build({"theta": PositiveScalar.from_value(th)}), y).log_likelihood
     np.testing.assert_allclose(float(ll), mod.loglike(th), rtol=1e-9)
 
-    # 2. The MLE. statsmodels' BFGS (its complex-step score) to a tight gradient tolerance: its
-    #    default L-BFGS-B uses a finite-difference gradient (ε = 1e-5) and stops ~1e-4 short.
-    res = mod.fit(start_params=np.ones(len(theta)), method="bfgs", maxiter=2000, disp=0, cov_type="approx", gtol=1e-10)
-    assert res.mle_retvals["converged"]
+    # 2. The MLE. statsmodels' BFGS (its complex-step score): its default L-BFGS-B uses a
+    #    finite-difference gradient (ε = 1e-5) and stops ~1e-4 short. The gradient tolerance is
+    #    on its objective −ℓ/n: at gtol = 1e-10 BFGS ends within a factor ~8 of the rounding
+    #    floor of the complex-step score (|score| 1.3e-11 here), so on another machine (other
+    #    BLAS rounding) its line search can stop on precision loss and statsmodels warns that the
+    #    fit did not converge. Over 90 variations of these cases (3 models × 10 data sets × 3
+    #    starts) BFGS reports convergence in 54 at gtol 1e-10 and in 87 at 1e-8, the same on
+    #    statsmodels 0.14.6 and 0.15.0. 1e-8 is two orders above the floor and still puts the
+    #    estimate within ~1e-9 relative of the 1e-10 optimum, inside the tolerances below.
+    res = mod.fit(start_params=np.ones(len(theta)), method="bfgs", maxiter=2000, disp=0, cov_type="approx", gtol=1e-8)
+    assert res.mle_retvals["converged"], res.mle_retvals
+    # statsmodels' own first-order condition at its optimum (score of ℓ/n in its parameters).
+    assert np.max(np.abs(mod.score(res.params))) < 1e-6
     f = fit(build, {"theta": PositiveScalar.from_value(np.ones(len(theta)))}, y)
     assert bool(f.ok) and bool(f.converged)
     est = np.asarray(f.natural_params["theta"])
     rel_est = np.max(np.abs(est / res.params - 1))
-    assert rel_est < 1e-4, rel_est
+    assert rel_est < 1e-6, rel_est
     # Ours is at least as good an optimum (same likelihood function, checked above).
     assert float(f.log_likelihood) >= res.llf - 1e-8 * abs(res.llf)
 
     # 3. Standard errors (natural scale, delta method) against statsmodels' cov_type="approx".
     se = np.asarray(f.standard_errors()["theta"])
     rel_se = np.max(np.abs(se / res.bse - 1))
-    assert rel_se < 1e-3, rel_se
+    assert rel_se < 1e-5, rel_se
     # Like with like at the same parameters (our optimum): only the Hessian method differs.
     bse_here = mod.smooth(est, cov_type="approx").bse
     np.testing.assert_allclose(se, bse_here, rtol=1e-5)

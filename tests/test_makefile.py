@@ -55,6 +55,7 @@ def work(tmp_path):
     w = tmp_path / "clone"
     w.mkdir()
     shutil.copy(ROOT / "pyproject.toml", w / "pyproject.toml")
+    shutil.copy(ROOT / "requirements.lock", w / "requirements.lock")
     return w
 
 
@@ -76,7 +77,10 @@ def test_half_made_venv_is_remade(work, tmp_path):
     assert not (work / ".venv" / "leftover").exists()
     assert (work / ".venv" / ".installed").exists()
     calls = (tmp_path / "calls.log").read_text().splitlines()
-    assert calls[0] == "venv .venv" and calls[-1] == "pip install --quiet -e .[test,notebooks,docs,export]"
+    assert calls[0] == "venv .venv" and calls[-1] == "pip install --quiet -c requirements.lock -e .[test,notebooks,docs,export]"
+    # Every pip install is constrained by the lock file (pip's own upgrade too).
+    installs = [c for c in calls if c.startswith("pip install")]
+    assert len(installs) == 2 and all("-c requirements.lock" in c for c in installs), installs
 
 
 def test_venv_of_an_old_python_is_remade(work, tmp_path):
@@ -96,3 +100,39 @@ def test_finished_venv_is_kept_when_pyproject_changes(work, tmp_path):
     p = _make(work, py)
     assert p.returncode == 0, p.stderr
     assert (work / ".venv" / "kept").exists() and "removing" not in p.stdout
+
+
+def test_a_changed_lock_file_reinstalls(work, tmp_path):
+    py = _fake_python(tmp_path, 11)
+    assert _make(work, py).returncode == 0
+    os.utime(work / ".venv" / ".installed", (0, 0))  # requirements.lock is now newer than the stamp
+    (tmp_path / "calls.log").write_text("")
+    (work / "pyproject.toml").touch()
+    os.utime(work / "pyproject.toml", (0, 0))
+    p = _make(work, py)
+    assert p.returncode == 0, p.stderr
+    assert "pip install --quiet -c requirements.lock" in (tmp_path / "calls.log").read_text()
+
+
+def _requirement_names(specs):
+    import re
+
+    return {re.split(r"[<>=!~\[; ]", s, maxsplit=1)[0].lower().replace("_", "-") for s in specs}
+
+
+def test_the_lock_pins_every_dependency_of_pyproject():
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    wanted = _requirement_names(project["dependencies"])
+    for extra in ("test", "notebooks", "docs", "export"):  # what make install installs
+        wanted |= _requirement_names(project["optional-dependencies"][extra])
+    pins = {}
+    for line in (ROOT / "requirements.lock").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            name, _, version = line.partition("==")
+            assert version, f"requirements.lock: {line!r} is not an exact pin"
+            pins[name.lower().replace("_", "-")] = version
+    assert not wanted - set(pins), f"not pinned in requirements.lock: {sorted(wanted - set(pins))}"
+    # The installer itself and the test oracles are pinned too.
+    assert {"pip", "setuptools", "jax", "jaxlib", "numpy", "scipy", "statsmodels"} <= set(pins)

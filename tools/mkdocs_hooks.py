@@ -1,4 +1,11 @@
-"""mkdocs hook: put the README's reproduction summary on the Studies page.
+"""mkdocs hooks: the gallery's executed notebooks are there; the README's reproduction summary.
+
+**Gallery check** (``on_config``). The gallery renders the executed copies in ``docs/gallery/``
+that ``make docs`` (or the notebook tests) write; a plain ``mkdocs build`` in a fresh clone has
+none, and strict mode would abort on one warning per missing page without saying why. The hook
+stops first with one line that names the missing copies and says to run ``make docs``.
+
+**Reproduction summary.**
 
 The README's ``## Reproduced studies`` section holds the reproduction summary, generated from
 ``jaxtrack reproduce all --json`` between ``<!-- reproduce:begin -->`` and
@@ -15,7 +22,23 @@ from pathlib import Path
 from mkdocs.exceptions import PluginError
 
 PLACEHOLDER = "<!-- include:reproduction-summary -->"
-README = Path(__file__).resolve().parent.parent / "README.md"
+ROOT = Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+
+
+def missing_gallery(root: Path = ROOT) -> list[str]:
+    """Names of the notebooks in ``notebooks/`` without an executed copy in ``docs/gallery/``."""
+    return sorted(p.name for p in (root / "notebooks").glob("*.ipynb") if not (root / "docs" / "gallery" / p.name).exists())
+
+
+def on_config(config):
+    missing = missing_gallery()
+    if missing:
+        raise PluginError(
+            f"docs/gallery/ lacks the executed copies of {len(missing)} notebook(s) ({', '.join(missing[:3])}"
+            f"{', …' if len(missing) > 3 else ''}): run `make docs`, which executes them and builds the site."
+        )
+    return config
 
 
 def reproduction_summary(readme_text: str) -> str:
