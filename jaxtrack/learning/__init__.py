@@ -6,6 +6,8 @@
 - ``_params``: constrained parametrisations (:class:`PositiveScalar`, :class:`Bounded`,
   :class:`SPDMatrix`, :class:`StochasticRows`) and the symmetric-gradient rule
   (:func:`symmetric_grad`).
+- ``_lbfgs``: :class:`LBFGS`, the default optimiser of :func:`fit` (one objective evaluation per
+  loop iteration).
 - ``_mle``: :func:`fit`, maximum likelihood for any model and filter over many recorded runs, with
   standard errors and confidence intervals from the observed information (:class:`MLEFit`).
 - ``_em``: :func:`fit_em`, expectation–maximisation (Shumway & Stoffer 1982) for
@@ -18,6 +20,7 @@ from ._imm_fit import (
     fit_imm as fit_imm,
     imm_log_likelihood as imm_log_likelihood,
 )
+from ._lbfgs import LBFGS as LBFGS
 from ._mle import MLEFit as MLEFit, fit as fit
 from ._params import (
     AbstractParametrisation as AbstractParametrisation,
@@ -37,6 +40,7 @@ __all__ = [
     "imm_log_likelihood",
     "AbstractParametrisation",
     "Bounded",
+    "LBFGS",
     "MLEFit",
     "PositiveScalar",
     "SPDMatrix",
