@@ -2,6 +2,22 @@
 
 import importlib
 import os
+from pathlib import Path
+
+# JAX's persistent compilation cache for the suite, set before JAX is imported so that every
+# process of the run shares it: both xdist workers, the notebook kernels and the CLI, sharded and
+# wheel subprocesses inherit the variables. A program compiled by one of them (or compiled again
+# after `jax.clear_caches()` below) is then loaded from disk. The folder is inside the checkout
+# (.cache/, gitignored), so a fresh clone starts cold, as CI does; JAXTRACK_TEST_CACHE_DIR=PATH
+# puts it elsewhere, JAXTRACK_TEST_CACHE_DIR=off runs without it.
+_TEST_CACHE = os.environ.get("JAXTRACK_TEST_CACHE_DIR", str(Path(__file__).resolve().parent.parent / ".cache" / "jax"))
+if _TEST_CACHE.strip().lower() in ("", "0", "off", "no", "false"):
+    os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
+    os.environ["JAXTRACK_CACHE_DIR"] = "off"  # the CLI's own default cache, off as well
+else:
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = _TEST_CACHE
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.2"
+    os.environ["JAXTRACK_CACHE_DIR"] = _TEST_CACHE  # the CLI subprocesses: same folder, not ~/.cache
 
 import jax
 import pytest
@@ -54,6 +70,9 @@ else:
     import jaxtrack  # noqa: F401
 
 jax.config.update("jax_enable_x64", True)
+if "JAX_COMPILATION_CACHE_DIR" in os.environ:  # in case a plugin imported JAX before this file
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
 # Catch accidental rank broadcasting between e.g. (n,) and (n, 1).
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
@@ -67,7 +86,33 @@ def pytest_addoption(parser):
     )
 
 
+# Scheduling hint for `pytest -n 2 --dist loadgroup` (make test): each test module is one work
+# unit (its module fixtures are computed once, on one worker), except the notebooks, one unit
+# each. The longest units are handed out first so that no worker is left alone with a long one
+# at the end; a module missing from this list only runs later. Order only, never selection.
+_LONG_FIRST = (
+    "test_notebooks", "test_sharding", "test_performance_paths", "test_obem_registration",
+    "test_bearings_tma", "test_mc_design", "test_sensitivity", "test_rows_baseline", "test_calibration",
+    "test_maneuvering",
+)
+
+
+def _work_unit(item) -> str:
+    module = item.path.stem
+    if module == "test_notebooks" and "[" in item.name:
+        return f"{module}[{item.name.split('[', 1)[1]}"
+    return module
+
+
 def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(_LONG_FIRST)}
+    order = {}
+    for i, item in enumerate(items):
+        unit = _work_unit(item)
+        item.add_marker(pytest.mark.xdist_group(unit))
+        order.setdefault(unit, i)
+    # Stable: units keep their own test order; long units first, then collection order.
+    items.sort(key=lambda it: (rank.get(it.path.stem, len(rank)), order[_work_unit(it)]))
     if config.getoption("--runslow"):
         return
     skip = pytest.mark.skip(reason="slow: run with --runslow or JAXTRACK_RUNSLOW=1")

@@ -25,6 +25,9 @@ def _parser() -> OneLineParser:
 
     # argparse prints "jaxtrack 0.1.0" on stdout and exits 0 (main turns the SystemExit into 0).
     parser.add_argument("--version", action="version", version=f"jaxtrack {__version__}")
+    parser.add_argument("--no-compilation-cache", action="store_true",
+                        help="do not keep compiled programs on disk (default: JAXTRACK_CACHE_DIR, else "
+                             "~/.cache/jaxtrack/jax; JAXTRACK_CACHE_DIR=off turns it off too)")
     sub = parser.add_subparsers(dest="command", required=True)
     from . import _design, _reproduce
 
@@ -140,6 +143,10 @@ def main(argv: list[str] | None = None) -> int:
             return fail(prog, msg)
     if msg := check_out_dir(args.out):
         return fail(prog, msg)
+    from . import _cache
+
+    # JAX's persistent compilation cache (a second run loads what the first compiled).
+    _cache.configure(disabled=args.no_compilation_cache)
     import matplotlib
 
     # The command line writes PNG files and never shows a window: headless backend, chosen here
