@@ -72,21 +72,30 @@ demo: $(STAMP)
 # compilations (about 250 tests each here); tests/conftest.py also clears JAX's in-memory caches
 # after each test module, and JAX's persistent compilation cache (.cache/jax, empty in a fresh
 # clone) lets a program compiled once in the run be loaded, not compiled, wherever it recurs.
+# The Ctrl-C tests (SIGINT to the test process and to a CLI child, with latency bounds) run in a
+# process of their own, without xdist: inside a worker that had run other modules first, both
+# failed once (the in-process SIGINT was not seen; the child took > 5 s), while they pass in a
+# worker alone; the cause was not found.
 ISOLATED := tests/test_faults.py tests/test_properties.py
-FIRST    := $(filter-out $(ISOLATED),$(sort $(wildcard tests/test_[a-m]*.py)))
-SECOND   := $(filter-out $(ISOLATED) $(FIRST),$(sort $(wildcard tests/test_*.py)))
-XDIST    ?= -n 2 --dist loadgroup
+SIGNALS  := tests/test_cli_robustness.py
+FIRST    := $(filter-out $(ISOLATED) $(SIGNALS),$(sort $(wildcard tests/test_[a-m]*.py)))
+SECOND   := $(filter-out $(ISOLATED) $(SIGNALS) $(FIRST),$(sort $(wildcard tests/test_*.py)))
+# --no-loadscope-reorder: keep tests/conftest.py's longest-first order of the work units (xdist
+# would otherwise hand them out by test count, leaving the one-test notebooks for the end).
+XDIST    ?= -n 2 --dist loadgroup --no-loadscope-reorder
 
 test: $(STAMP)
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(FIRST)
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(SECOND)
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
+	$(BIN)/pytest $(PYTEST_ARGS) $(SIGNALS)
 	$(MAKE) docs
 
 test-slow: $(STAMP)
 	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(FIRST)
 	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(SECOND)
 	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
+	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(SIGNALS)
 
 # statsmodels, the MLE oracle, on its 0.14 line as well as the locked version: installs 0.14.x
 # into a throw-away folder ahead of the venv's packages and runs the statsmodels comparison.

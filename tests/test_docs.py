@@ -141,6 +141,24 @@ def test_reproduction_summary_comes_from_the_readme():
     assert "jaxtrack reproduce" in hooks.reproduction_summary((ROOT / "README.md").read_text(encoding="utf-8"))
 
 
+def test_a_build_without_the_gallery_says_to_run_make_docs(tmp_path):
+    spec = importlib.util.spec_from_file_location("_mkdocs_hooks", ROOT / "tools" / "mkdocs_hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    (tmp_path / "notebooks").mkdir()
+    (tmp_path / "docs" / "gallery").mkdir(parents=True)
+    for name in ("a.ipynb", "b.ipynb"):
+        (tmp_path / "notebooks" / name).write_text("{}")
+    (tmp_path / "docs" / "gallery" / "a.ipynb").write_text("{}")
+    assert hooks.missing_gallery(tmp_path) == ["b.ipynb"]
+    hooks.ROOT = tmp_path
+    with pytest.raises(Exception, match=r"1 notebook\(s\) \(b.ipynb\): run `make docs`") as err:
+        hooks.on_config({})
+    assert "\n" not in str(err.value)
+    (tmp_path / "docs" / "gallery" / "b.ipynb").write_text("{}")
+    assert hooks.on_config({"x": 1}) == {"x": 1}
+
+
 def test_sphinx_roles_become_links_to_documented_names_and_code_otherwise():
     spec = importlib.util.spec_from_file_location("_griffe_roles", ROOT / "tools" / "griffe_roles.py")
     roles = importlib.util.module_from_spec(spec)

@@ -26,8 +26,9 @@ ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
 
 
-def missing_gallery(root: Path = ROOT) -> list[str]:
+def missing_gallery(root: Path | None = None) -> list[str]:
     """Names of the notebooks in ``notebooks/`` without an executed copy in ``docs/gallery/``."""
+    root = ROOT if root is None else root
     return sorted(p.name for p in (root / "notebooks").glob("*.ipynb") if not (root / "docs" / "gallery" / p.name).exists())
 
 
