@@ -104,7 +104,12 @@ def _work_unit(item) -> str:
     return module
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
+    # tryfirst: xdist's worker reads the xdist_group marks in its own modifyitems hook (it turns
+    # them into "@unit" nodeid suffixes); a mark added after it is ignored and every test becomes
+    # its own unit, sent to either worker, so module fixtures are built on both and torn down
+    # between consecutive tests (the maneuvering study's 73 s fixture ran twice).
     rank = {name: i for i, name in enumerate(_LONG_FIRST)}
     order = {}
     for i, item in enumerate(items):
