@@ -80,9 +80,9 @@ ISOLATED := tests/test_faults.py tests/test_properties.py
 SIGNALS  := tests/test_cli_robustness.py
 FIRST    := $(filter-out $(ISOLATED) $(SIGNALS),$(sort $(wildcard tests/test_[a-m]*.py)))
 SECOND   := $(filter-out $(ISOLATED) $(SIGNALS) $(FIRST),$(sort $(wildcard tests/test_*.py)))
-# --no-loadscope-reorder: keep tests/conftest.py's longest-first order of the work units (xdist
+# --no-loadscope-reorder: keep the longest-first order of the work units of tests/conftest.py (xdist
 # would otherwise hand them out by test count, leaving the one-test notebooks for the end).
-XDIST    ?= -n 2 --dist loadgroup --no-loadscope-reorder
+XDIST    ?= -n 2 --dist loadscope --no-loadscope-reorder
 
 test: $(STAMP)
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(FIRST)

@@ -86,38 +86,45 @@ def pytest_addoption(parser):
     )
 
 
-# Scheduling hint for `pytest -n 2 --dist loadgroup` (make test): each test module is one work
-# unit (its module fixtures are computed once, on one worker), except the notebooks, one unit
-# each. The longest units are handed out first so that no worker is left alone with a long one
-# at the end; a module missing from this list only runs later. Order only, never selection.
+# Scheduling for `pytest -n 2` (make test): each test module is one work unit of a worker (its
+# module fixtures are built once, on one worker), except the notebooks, one unit each; the
+# longest units are handed out first (collection order below, kept by --no-loadscope-reorder)
+# so that no worker is left alone with a long one at the end. A module missing from this list
+# only runs later. Order only, never selection. (xdist_group marks cannot do this here: xdist's
+# worker reads them in a collection hook that runs before this file's, and then sends every
+# test on its own, so a module fixture was built on both workers and torn down between tests.)
 _LONG_FIRST = (
-    "test_notebooks", "test_sharding", "test_performance_paths", "test_obem_registration",
-    "test_bearings_tma", "test_mc_design", "test_sensitivity", "test_rows_baseline", "test_calibration",
-    "test_maneuvering",
+    "test_notebooks", "test_sharding", "test_performance_paths", "test_maneuvering", "test_mc_design",
+    "test_obem_registration", "test_bearings_tma", "test_calibration", "test_sensitivity", "test_rows_baseline",
+    "test_mc_gradient_ekf", "test_mc_gradient_memory",
 )
 
 
-def _work_unit(item) -> str:
-    module = item.path.stem
-    if module == "test_notebooks" and "[" in item.name:
-        return f"{module}[{item.name.split('[', 1)[1]}"
-    return module
+def _work_unit(nodeid: str) -> str:
+    path, _, rest = nodeid.partition("::")
+    if path.endswith("test_notebooks.py") and "[" in rest:
+        return nodeid
+    return path
 
 
-@pytest.hookimpl(tryfirst=True)
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleUnits(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            return _work_unit(nodeid)
+
+    return ModuleUnits(config, log)
+
+
 def pytest_collection_modifyitems(config, items):
-    # tryfirst: xdist's worker reads the xdist_group marks in its own modifyitems hook (it turns
-    # them into "@unit" nodeid suffixes); a mark added after it is ignored and every test becomes
-    # its own unit, sent to either worker, so module fixtures are built on both and torn down
-    # between consecutive tests (the maneuvering study's 73 s fixture ran twice).
     rank = {name: i for i, name in enumerate(_LONG_FIRST)}
     order = {}
     for i, item in enumerate(items):
-        unit = _work_unit(item)
-        item.add_marker(pytest.mark.xdist_group(unit))
-        order.setdefault(unit, i)
+        order.setdefault(_work_unit(item.nodeid), i)
     # Stable: units keep their own test order; long units first, then collection order.
-    items.sort(key=lambda it: (rank.get(it.path.stem, len(rank)), order[_work_unit(it)]))
+    items.sort(key=lambda it: (rank.get(it.path.stem, len(rank)), order[_work_unit(it.nodeid)]))
     if config.getoption("--runslow"):
         return
     skip = pytest.mark.skip(reason="slow: run with --runslow or JAXTRACK_RUNSLOW=1")
