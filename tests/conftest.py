@@ -10,13 +10,15 @@ from pathlib import Path
 # after `jax.clear_caches()` below) is then loaded from disk. The folder is inside the checkout
 # (.cache/, gitignored), so a fresh clone starts cold, as CI does; JAXTRACK_TEST_CACHE_DIR=PATH
 # puts it elsewhere, JAXTRACK_TEST_CACHE_DIR=off runs without it.
+from jaxtrack.cli._cache import MIN_COMPILE_TIME_S, OFF_VALUES  # noqa: E402  (jaxtrack imports no JAX)
+
 _TEST_CACHE = os.environ.get("JAXTRACK_TEST_CACHE_DIR", str(Path(__file__).resolve().parent.parent / ".cache" / "jax"))
-if _TEST_CACHE.strip().lower() in ("", "0", "off", "no", "false"):
+if _TEST_CACHE.strip().lower() in OFF_VALUES:
     os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
     os.environ["JAXTRACK_CACHE_DIR"] = "off"  # the CLI's own default cache, off as well
 else:
     os.environ["JAX_COMPILATION_CACHE_DIR"] = _TEST_CACHE
-    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.2"
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = str(MIN_COMPILE_TIME_S)
     os.environ["JAXTRACK_CACHE_DIR"] = _TEST_CACHE  # the CLI subprocesses: same folder, not ~/.cache
 
 import jax
@@ -72,7 +74,7 @@ else:
 jax.config.update("jax_enable_x64", True)
 if "JAX_COMPILATION_CACHE_DIR" in os.environ:  # in case a plugin imported JAX before this file
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", MIN_COMPILE_TIME_S)
 # Catch accidental rank broadcasting between e.g. (n,) and (n, 1).
 jax.config.update("jax_numpy_rank_promotion", "raise")
 

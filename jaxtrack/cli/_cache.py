@@ -27,7 +27,8 @@ import os
 import sys
 from pathlib import Path
 
-_OFF = {"", "0", "off", "no", "false", "none"}
+# Values of JAXTRACK_CACHE_DIR (and the suite's JAXTRACK_TEST_CACHE_DIR) that mean "no cache".
+OFF_VALUES = frozenset({"", "0", "off", "no", "false", "none"})
 # Write compilations that took at least this long (seconds); JAX's default is 1.0.
 MIN_COMPILE_TIME_S = 0.2
 
@@ -45,7 +46,7 @@ def cache_dir(disabled: bool = False, environ=os.environ) -> Path | None:
         return None
     setting = environ.get("JAXTRACK_CACHE_DIR")
     if setting is not None:
-        return None if setting.strip().lower() in _OFF else Path(setting).expanduser()
+        return None if setting.strip().lower() in OFF_VALUES else Path(setting).expanduser()
     if environ.get("JAX_COMPILATION_CACHE_DIR"):
         return None
     base = environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
