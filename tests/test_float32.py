@@ -55,7 +55,10 @@ def test_float32_mismodelled_but_not_extreme_is_not_flagged():
 
 
 def test_reproduce_refuses_float32_with_one_line(tmp_path):
-    env = {**os.environ, "JAXTRACK_ENABLE_X64": "0"}
+    # JAX_ENABLE_X64 is dropped: importing jaxtrack (conftest) sets it for JAX, and a child that
+    # inherits it runs in float64 whatever JAXTRACK_ENABLE_X64 says (jaxtrack._config._request_x64).
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    env["JAXTRACK_ENABLE_X64"] = "0"
     proc = subprocess.run([sys.executable, "-m", "jaxtrack", "reproduce", "ho", "--out", str(tmp_path)],
                           capture_output=True, text=True, timeout=120, env=env)
     assert proc.returncode == 2, proc.stderr
