@@ -49,3 +49,21 @@ def test_a_cli_run_writes_its_compilations_to_the_cache(tmp_path):
     assert p.returncode == 0, p.stderr[-2000:]
     entries = list((tmp_path / "cache").iterdir())
     assert entries, "the demo wrote nothing to JAXTRACK_CACHE_DIR"
+    # The same run again loads every program it compiles from the cache, the short ones included
+    # (_cache.MIN_COMPILE_TIME_S = 0: a study's hundreds of ~40 ms eager-op compilations were
+    # compiled again on every warm run). JAX_LOG_COMPILES logs each compilation ("Compiling ...",
+    # then "Finished XLA compilation of NAME") and, in between, each hit. The one exception is
+    # run_filter's program: its eqx.error_if is a host callback, and JAX never caches those.
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env={**env, "JAX_LOG_COMPILES": "1"})
+    assert p.returncode == 0, p.stderr[-2000:]
+    compiled, missed, hit = 0, [], False
+    for line in p.stderr.splitlines():
+        if line.startswith("Compiling "):
+            hit = False
+        elif "Persistent compilation cache hit" in line:
+            hit = True
+        elif line.startswith("Finished XLA compilation of "):
+            compiled += 1
+            if not hit:
+                missed.append(line.split()[4])
+    assert compiled > 10 and set(missed) <= {"jit(_run_filter_jit)"}, (compiled, missed)
