@@ -19,8 +19,8 @@ the device, so a stale entry is never used; deleting the folder is always safe. 
 compilation is written, however short (JAX's default writes only those of at least 1 s): a
 study also compiles hundreds of small programs (its eager array operations, ~40 ms each), and
 with them cached a warm ``reproduce tma`` takes 18.8 s instead of 26.2 s (cold 30-38 s;
-``benchmarks/first_call.py``). The entries are small (a few kB each). The library itself (``import jaxtrack``) never
-turns the cache on: that is JAX's setting, and a user's to choose.
+``benchmarks/first_call.py``). The entries are small (about 7 kB each). The library itself
+(``import jaxtrack``) never turns the cache on: that is JAX's setting, and a user's to choose.
 """
 
 from __future__ import annotations
