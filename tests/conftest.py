@@ -150,3 +150,38 @@ def _release_compiled_code():
     """
     yield
     jax.clear_caches()
+
+
+# Where the suite's time goes: JAXTRACK_TEST_PROFILE=FOLDER writes one line per test to
+# FOLDER/<pid>.tsv (one file per process): its wall time, the seconds JAX spent in XLA's compiler
+# and in tracing/lowering during it (module fixtures count in the first test that builds them),
+# and the process's resident memory after it (MB). tools/suite_profile.py sums them by module.
+# Off by default: no listener is registered.
+_PROFILE_DIR = os.environ.get("JAXTRACK_TEST_PROFILE")
+if _PROFILE_DIR:
+    import time as _time
+
+    _totals = {"compile": 0.0, "trace": 0.0}
+    _TRACE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration")
+
+    def _listen(event, duration, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            _totals["compile"] += duration
+        elif event in _TRACE_EVENTS:
+            _totals["trace"] += duration
+
+    jax.monitoring.register_event_duration_secs_listener(_listen)
+
+    def _rss_mb() -> float:
+        with open("/proc/self/statm", encoding="ascii") as f:  # Linux: resident pages, 2nd field
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item, nextitem):
+        before, t = dict(_totals), _time.perf_counter()
+        yield
+        wall = _time.perf_counter() - t
+        Path(_PROFILE_DIR).mkdir(parents=True, exist_ok=True)
+        with open(Path(_PROFILE_DIR) / f"{os.getpid()}.tsv", "a", encoding="utf-8") as f:
+            f.write(f"{item.nodeid}\t{wall:.3f}\t{_totals['compile'] - before['compile']:.3f}"
+                    f"\t{_totals['trace'] - before['trace']:.3f}\t{_rss_mb():.0f}\n")
