@@ -277,8 +277,65 @@ def test_zero_range_is_finite():
         def values(x, model=model):
             return model.mean(x, 0), model.jacobian(x, 0), jax.grad(lambda x: model.mean(x, 0).sum())(x)
 
-        for value in values(x):
-            assert np.all(np.isfinite(np.asarray(value)))
+        mean, jac, grad = values(x)
+        assert np.all(np.isfinite(np.asarray(mean))) and np.all(np.isfinite(np.asarray(grad)))
+        # The Jacobian is undefined there: NaN, so that a filter linearised there fails loudly
+        # (issue 37; it used to be 0, which made the EKF ignore every measurement, ok=True).
+        assert np.all(np.isnan(np.asarray(jac)))
+        # ... and defined (finite) a metre away.
+        assert np.all(np.isfinite(np.asarray(values(x.at[0].add(1.0))[1])))
+
+
+def _cv_on(sensor, dim):
+    """A constant-velocity target seen by ``sensor`` at the origin: the truth 8-12 km out, and a
+    filter model whose prior mean is 0 (on the sensor, the "uninformed" prior of issue 37)."""
+    from jaxtrack.models import ConstantVelocity
+
+    n = 2 * dim
+    cov = jnp.diag(jnp.concatenate([jnp.full(dim, 1e4), jnp.full(dim, 50.0)]) ** 2)
+    x0 = jnp.array([8e3, 12e3, 3e3][:dim] + [-100.0, 20.0, 0.0][:dim])
+    truth = TrackingModel(ConstantVelocity(1.0, 0.1, dim=dim), sensor, x0, cov)
+    return truth, TrackingModel(ConstantVelocity(1.0, 0.1, dim=dim), sensor, jnp.zeros(n), cov)
+
+
+SENSORS_AT_ORIGIN = {
+    "range_bearing": (RangeBearing((10.0, 1e-3)), 2),
+    "bearing": (Bearing((1e-3,)), 2),
+    "range_azimuth_elevation": (RangeAzimuthElevation(noise_std=(10.0, 1e-3, 1e-3)), 3),
+}
+
+
+@pytest.mark.parametrize("name", SENSORS_AT_ORIGIN)
+def test_a_filter_linearised_on_the_sensor_fails_loudly(name):
+    """Issue 37, cause 1: the EKF and iterated EKF with the prior mean on the sensor returned
+    ok=True while ignoring every measurement (zero Jacobian rows); now ok=False, and with
+    throw=True the error names the cause. A step whose measurement is missing does not fail."""
+    from jaxtrack.filters import IteratedExtendedKalmanFilter
+    from jaxtrack.montecarlo import simulate
+
+    sensor, dim = SENSORS_AT_ORIGIN[name]
+    truth, model = _cv_on(sensor, dim)
+    z = simulate(truth, jax.random.key(0), 20).measurements
+    for filt in (ExtendedKalmanFilter(), IteratedExtendedKalmanFilter(num_iterations=2)):
+        assert not bool(run_filter(filt, model, z, throw=False).ok), type(filt).__name__
+    with pytest.raises(Exception, match="linearised a sensor model where its Jacobian is undefined"):
+        jax.block_until_ready(run_filter(ExtendedKalmanFilter(), model, z))
+    # Every measurement missing: the NaN Jacobian is never used, the filter only predicts.
+    none = run_filter(ExtendedKalmanFilter(), model, z, mask=jnp.zeros(20, bool), throw=False)
+    assert bool(none.ok) and np.all(np.isfinite(np.asarray(none.filtered_cov)))
+    # The same prior mean a metre off the sensor: defined, and the measurements are used.
+    moved = eqx.tree_at(lambda m: m.initial_mean, model, model.initial_mean.at[0].set(1.0))
+    res = run_filter(ExtendedKalmanFilter(), moved, z, throw=False)
+    assert bool(res.ok) and float(res.filtered_cov[-1, 0, 0]) < 0.5 * float(model.initial_cov[0, 0])
+
+
+def test_radar_straight_above_its_vertical_axis_is_undefined():
+    """RangeAzimuthElevation's azimuth is undefined on the sensor's vertical axis (any height)."""
+    sensor = RangeAzimuthElevation(noise_std=(10.0, 1e-3, 1e-3), sensor_position=(5.0, -3.0, 0.0),
+                                   world_to_sensor_rotation=sensor_rotation(yaw=0.3))
+    above = jnp.array([5.0, -3.0, 2e3, 0.0, 0.0, 0.0])
+    assert np.all(np.isnan(np.asarray(sensor.jacobian(above, 0))))
+    assert np.all(np.isfinite(np.asarray(sensor.jacobian(above.at[0].add(1.0), 0))))
 
 
 def test_input_errors_name_the_argument():
@@ -382,3 +439,14 @@ def test_log_likelihood_gradient_wrt_bias_and_noise_std(filt):
             minus[which] = params[which].at[i].add(-h)
             fd = (float(loglik(tuple(plus))) - float(loglik(tuple(minus)))) / (2 * h)
             np.testing.assert_allclose(g[i], fd, rtol=1e-6)
+
+
+def test_monte_carlo_with_the_prior_on_the_sensor_says_so():
+    """Issue 37: through monte_carlo the same model gave a 7.5 km RMSE with no warning."""
+    from jaxtrack.montecarlo import monte_carlo
+
+    truth, model = _cv_on(*SENSORS_AT_ORIGIN["range_bearing"])
+    with pytest.raises(FloatingPointError, match="prior mean sits on a sensor"), \
+            pytest.warns(RuntimeWarning, match="20 of 20 runs produced a non-finite estimate"):
+        monte_carlo(truth, jax.random.key(0), 20, num_steps=10, filter=ExtendedKalmanFilter(), filter_model=model,
+                    progress=False)

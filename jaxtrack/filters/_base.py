@@ -350,7 +350,10 @@ _FILTER_FAILED = (
     "NaN/inf (pass nan_as_missing=True to skip them); (b) R or the prior covariance is not "
     "symmetric positive definite, or Q not positive semidefinite (e.g. a negative sampling "
     "period); (c) units differ by many orders of magnitude (e.g. rad vs deg, m vs km); (d) the "
-    "state diverged. Pass throw=False to get the result with ok=False instead."
+    "state diverged; (e) an extended or iterated Kalman filter linearised a sensor model where its "
+    "Jacobian is undefined (NaN): the predicted mean on the sensor's position, e.g. a prior mean of 0 "
+    "with the sensor at the origin - start the prior elsewhere or use the unscented filter. "
+    "Pass throw=False to get the result with ok=False instead."
 )
 
 

@@ -171,7 +171,10 @@ def condition_linearized(
     innovation ``(m,)``, ``S`` ``(m, m)``, the log-likelihood (scalar) and the gain ``(n, m)``.
     """
     obs_f = observed.astype(cov.dtype)
-    H = H * obs_f[:, None]
+    # A select, not a product with the mask: a missing component's row may be NaN (a sensor's
+    # Jacobian where it is undefined, e.g. linearised at the sensor's own position), and a
+    # measurement that is not used must not fail the update.
+    H = jnp.where(observed[:, None], H, 0.0)
     R = masked_noise(R, observed)
     innovation = jnp.where(observed, innovation, 0.0)
     # Small products go through `matmul` (element-wise loops under vmap, see `_linalg`).

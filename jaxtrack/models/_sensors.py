@@ -34,9 +34,15 @@ indexed by the step ``k`` as :func:`jaxtrack.models.at_step`), so a moving senso
 :func:`_azimuth_row` etc.).
 
 **Degenerate geometry.** At range 0 (target on the sensor) the values are finite: range and
-range rate 0, angles 0 (elevation ±π/2 straight above or below the sensor, azimuth 0 there). The
-Jacobian is undefined at those points; the rows that are undefined are returned as 0 (finite, so a
-filter does not NaN, but the linearisation carries no information there).
+range rate 0, angles 0 (elevation ±π/2 straight above or below the sensor, azimuth 0 there), and
+so are their ``jax.grad`` (0). The Jacobian is undefined there — and for
+:class:`RangeAzimuthElevation` on the sensor's vertical axis, where the azimuth is — so
+:meth:`~_AbstractSensor.jacobian` returns NaN at such a point: an extended (or iterated) Kalman
+filter linearised there fails loudly (``ok=False``, or the filter's error naming this cause)
+instead of running with a zero row that silently ignores every measurement. The usual way in is
+an "uninformed" prior mean on the sensor (e.g. mean 0 with the radar at the origin): give the
+prior mean anywhere else (e.g. a first measurement converted to position), or use an unscented
+filter, which needs no Jacobian. A measurement component marked missing never fails the update.
 """
 
 from __future__ import annotations
@@ -306,8 +312,18 @@ class _AbstractSensor(AbstractMeasurementModel):
         shift = jnp.where(z > jnp.pi, -two_pi, jnp.where(z <= -jnp.pi, two_pi, 0.0))
         return jnp.where(is_angle, z + shift, z)
 
+    def _undefined(self, x: Array, k) -> Array:
+        """Whether the Jacobian at ``x`` is undefined: the target on the sensor (range 0)."""
+        d, _ = self._relative(x, k)
+        return jnp.all(d == 0)
+
     def jacobian(self, x: Float[Array, " n"], k: Int[ArrayLike, ""]) -> Float[Array, "m n"]:
-        """The analytic ``∂h_k/∂x`` (0 in the rows undefined at degenerate geometry)."""
+        """The analytic ``∂h_k/∂x``; all NaN where it is undefined (see *Degenerate geometry* in
+        the module docstring: a linearisation there must fail, not ignore the measurement)."""
+        H = self._jacobian(x, k)
+        return jnp.where(self._undefined(x, k), jnp.nan, H)
+
+    def _jacobian(self, x: Array, k) -> Array:
         rows = self._rows(x, k)
         Hp = jnp.stack([row[1] for row in rows])
         # Columns placed by static index (no scatter): position columns, then velocity columns.
@@ -534,6 +550,13 @@ class RangeAzimuthElevation(_AbstractSensor):
 
     def _orientation_arrays(self) -> dict:
         return {"world_to_sensor_rotation": (self.world_to_sensor_rotation, 2)}
+
+    def _undefined(self, x, k):
+        # The azimuth is undefined on the sensor's vertical axis (horizontal sensor-frame
+        # components both 0), the target's position on the sensor included.
+        d, _ = self._relative(x, k)
+        ds = _rotate(at_step(self.world_to_sensor_rotation, k, 2), d)
+        return (ds[0] == 0) & (ds[1] == 0)
 
     def _rows(self, x, k):
         d, u = self._relative(x, k)

@@ -179,7 +179,13 @@ def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=No
             stacklevel=3,
         )
     if num_ok == 0:
-        raise FloatingPointError("jaxtrack.monte_carlo: every run produced a non-finite estimate.")
+        raise FloatingPointError(
+            "jaxtrack.monte_carlo: every run produced a non-finite estimate. Common causes: an "
+            "extended or iterated Kalman filter whose prior mean sits on a sensor's position (its "
+            "Jacobian is undefined there; start the prior elsewhere or use the unscented filter), "
+            "or noise covariances that are not positive definite. run_filter on one run with "
+            "throw=True names the failing check."
+        )
     averages = _run_averages(sums, num_ok, n)
     mean_nees, anees = averages["nees"], averages["anees"]
     # Run i's NIS at step k is χ²(d_ik) (its observed components); the runs are independent, so
