@@ -204,7 +204,8 @@ class Exportable:
 
         **Raises:** ``FileNotFoundError`` if ``path`` does not exist; :class:`~jaxtrack.InputError`
         naming ``path`` if it is not such a file: not an ``.npz`` archive, no ``meta`` entry,
-        another ``kind``, a ``format_version`` other than 1, or missing / unknown fields.
+        another ``kind``, a ``format_version`` other than 1, missing / unknown fields, or arrays
+        that disagree on the length of a named axis (e.g. per-step arrays of different lengths).
         """
         def bad(why: str) -> InputError:
             return InputError(f"`path` {str(path)!r} is not a saved {cls.__name__}: {why}.")
@@ -238,7 +239,22 @@ class Exportable:
         result, used = cls._from_flat(meta, entries, "", bad)
         if unknown := sorted(set(entries) - used):
             raise bad(f"unknown fields {unknown}")
+        result._check_dims(bad)
         return result
+
+    def _check_dims(self, bad) -> None:
+        """Every named axis (``time``, ``state``, ``mode``…) has one length across the arrays.
+
+        A result built by jaxtrack always has; a file edited or assembled by hand may not (one
+        per-step array longer than the others), and would otherwise load and plot misaligned.
+        """
+        sizes: dict[str, tuple[int, str]] = {}
+        for name, arr, dims, _ in self._labelled():
+            for axis, dim in zip(dims, arr.shape[len(arr.shape) - len(dims):]):
+                first = sizes.setdefault(axis, (dim, name))
+                if first[0] != dim:
+                    raise bad(f"its arrays disagree on the length of axis `{axis}`: `{first[1]}` has "
+                              f"{first[0]}, `{name}` has {dim}")
 
     @classmethod
     def _from_flat(cls, meta: dict, entries: dict, prefix: str, bad):

@@ -237,3 +237,21 @@ def test_load_refuses_wrong_files_naming_path(cv_result, tmp_path):
         MonteCarloResult.load(bad_json)
     with pytest.raises(FileNotFoundError):
         MonteCarloResult.load(tmp_path / "missing.npz")
+
+
+def test_load_refuses_arrays_of_different_lengths(cv_result, imm_result, tmp_path):
+    """Issue 37, cause 5: a file whose per-step arrays disagree in length loaded without a word."""
+    good = cv_result.save(tmp_path / "good.npz")
+    with np.load(good) as npz:
+        mse, nis = npz["mse"], npz["nis"]
+    cases = {
+        _rewrite(good, tmp_path / "short.npz", add={"mse": mse[:-1]}): "axis `time`: `mse` has 19, `mean_error` has 20",
+        _rewrite(good, tmp_path / "long.npz", add={"nis": np.append(nis, 1.0)}): "length of axis `time`",
+        _rewrite(good, tmp_path / "state.npz", add={"mse": mse[:, :3]}): "length of axis `component`: `mse` has 3, `mean_error` has 4",
+    }
+    for path, why in cases.items():
+        with pytest.raises(InputError, match=why) as info:
+            MonteCarloResult.load(path)
+        assert "`path`" in str(info.value), str(info.value)
+    # A consistent file of another shape (the IMM's, with mode probabilities) still loads.
+    _assert_identical(imm_result, MonteCarloResult.load(imm_result.save(tmp_path / "imm.npz")))

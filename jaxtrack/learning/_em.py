@@ -50,7 +50,7 @@ from ..filters._base import FirstStep
 from ..filters._smoother import lag_one_covariances, rts_smoother
 from ..filters._updates import symmetrize
 from ..models._base import LinearGaussianModel
-from ._runs import prepare_runs, select
+from ._runs import any_observed, prepare_runs, select
 
 # The EM parameters, in the order they are carried, and the model fields that hold them.
 _NAMES = ("F", "Q", "H", "R", "initial_mean", "initial_cov")
@@ -339,4 +339,4 @@ def fit_em(
         # Fixed arrays stay the input's own objects (bit for bit, per-step ones unpadded).
         out = eqx.tree_at(lambda md: tuple(getattr(md, k) for k in free), model,
                           tuple(fitted[_NAMES.index(k)] for k in free))
-    return EMFit(out, history, ll, steps, ok)
+    return EMFit(out, history, ll, steps, ok & any_observed(obs))

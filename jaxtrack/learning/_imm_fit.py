@@ -47,7 +47,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 from .._validation import InputError, check_finite
 from ..filters._base import FirstStep
 from ..filters._imm import InteractingMultipleModel, run_imm
-from ._runs import all_finite as _all_finite, check_params, prepare_runs, select as _select
+from ._runs import all_finite as _all_finite, any_observed, check_params, prepare_runs, select as _select
 
 # Built once so that the default does not create new closures (and a recompilation) per call.
 _DEFAULT_OPTIMIZER = optax.adam(1e-2)
@@ -103,9 +103,9 @@ def _check_build_and_params(build, params) -> tuple[PyTree, InteractingMultipleM
     return params, imm
 
 
-def _prepare_tracks(imm, measurements, mask) -> tuple[Array, Array]:
+def _prepare_tracks(imm, measurements, mask, require_observed=True) -> tuple[Array, Array]:
     """``measurements`` → ``(R, T, m)`` floats with missing entries 0, ``mask`` → ``(R, T, m)`` bools."""
-    return prepare_runs(imm.models[0].meas_dim, imm.transition_probs.dtype, measurements, mask)
+    return prepare_runs(imm.models[0].meas_dim, imm.transition_probs.dtype, measurements, mask, require_observed)
 
 
 def _check_first_step(first_step):
@@ -154,7 +154,7 @@ def imm_log_likelihood(
     """
     _check_first_step(first_step)
     params, imm = _check_build_and_params(build, params)
-    z, observed = _prepare_tracks(imm, measurements, mask)
+    z, observed = _prepare_tracks(imm, measurements, mask, require_observed=False)  # ℓ of no data: 0
     return _total_log_likelihood(build, params, z, observed, first_step)
 
 
@@ -268,4 +268,4 @@ def fit_imm(
         build, params, z, observed, optimizer, int(num_iterations), first_step, ll_dtype
     )
     # Built outside the trace so the IMM's concrete checks (stochastic rows, …) run on the result.
-    return IMMFit(fitted, build(fitted), history, grad_norms, accepted, ok)
+    return IMMFit(fitted, build(fitted), history, grad_norms, accepted, ok & any_observed(observed))

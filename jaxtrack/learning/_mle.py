@@ -63,7 +63,7 @@ from ..filters._kalman import KalmanFilter
 from ..models import AbstractStateSpaceModel
 from ._lbfgs import LBFGS
 from ._params import AbstractParametrisation, natural
-from ._runs import all_finite, check_params, prepare_runs, select
+from ._runs import all_finite, any_observed, check_params, prepare_runs, select
 
 # L-BFGS (memory 10) with a strong-Wolfe line search, one objective evaluation per loop
 # iteration (_lbfgs: the compiled fit holds the objective once, not four times as with optax's).
@@ -464,4 +464,5 @@ def fit(
             bar.close()
             _PROGRESS["bar"] = None
     # Built outside the loop so that the model's concrete checks run on the result.
+    ok = ok & any_observed(observed)
     return MLEFit(fitted, build(fitted), hist, ghist, steps, converged, ok, filter, z, observed, build, first_step)

@@ -13,17 +13,19 @@ from jaxtyping import Array, ArrayLike
 from .._validation import InputError, check_finite, check_shape, is_concrete
 
 
-def prepare_runs(meas_dim: int, dtype, measurements: ArrayLike, mask: ArrayLike | None) -> tuple[Array, Array]:
+def prepare_runs(meas_dim: int, dtype, measurements: ArrayLike, mask: ArrayLike | None,
+                 require_observed: bool = True) -> tuple[Array, Array]:
     """Validate a batch of recorded runs and its mask.
 
     **Arguments:** ``meas_dim``: ``m``; ``dtype``: the float dtype for integer measurements;
     ``measurements``: ``(R, T, m)`` (``R`` runs of ``T`` steps) or ``(T, m)`` (one run);
-    ``mask``: optional boolean ``(R, T)``/``(R, T, m)`` (``(T,)``/``(T, m)`` for one run), True = observed.
+    ``mask``: optional boolean ``(R, T)``/``(R, T, m)`` (``(T,)``/``(T, m)`` for one run), True = observed;
+    ``require_observed``: refuse a mask with no observed entry (a fit; a log-likelihood of no data is 0).
 
     **Returns:** ``(z, observed)``: floats ``(R, T, m)`` with missing entries 0, booleans ``(R, T, m)``.
 
     **Raises:** ``InputError`` naming ``measurements`` or ``mask`` (wrong shapes, non-boolean mask,
-    observed non-finite entries when concrete).
+    observed non-finite entries, or no entry observed at all, when concrete).
     """
     m = meas_dim
     z = jnp.asarray(measurements)
@@ -50,6 +52,14 @@ def prepare_runs(meas_dim: int, dtype, measurements: ArrayLike, mask: ArrayLike 
         if mk.dtype != bool:
             raise InputError(f"`mask` must be boolean (True = observed); got dtype {mk.dtype}.")
         observed = jnp.broadcast_to(mk[..., None] if mk.ndim == 2 else mk, z.shape)
+    if require_observed and is_concrete(observed) and not bool(np.any(np.asarray(observed))):
+        # Nothing to fit: every iterate would have the same (zero) likelihood and the fit would
+        # return its start as a success. A traced mask gets the same answer through the fits'
+        # `ok` (any_observed below).
+        raise InputError(
+            f"`mask` marks no measurement as observed (all {int(np.asarray(observed).size)} entries False): "
+            "there is no data to fit."
+        )
     if is_concrete(z) and is_concrete(observed):
         bad = np.asarray(observed) & ~np.isfinite(np.asarray(z))
         if bad.any():
@@ -60,6 +70,12 @@ def prepare_runs(meas_dim: int, dtype, measurements: ArrayLike, mask: ArrayLike 
             )
     # Missing entries may hold anything: never let them into the arithmetic.
     return jnp.where(observed, z, 0.0), observed
+
+
+def any_observed(observed: Array) -> Array:
+    """The traced twin of :func:`prepare_runs`' "no measurement observed" error: a scalar bool
+    that the fits fold into their ``ok`` (a mask built inside ``jit``/``vmap`` is not checked)."""
+    return jnp.any(observed)
 
 
 def all_finite(tree) -> Array:
