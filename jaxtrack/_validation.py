@@ -32,6 +32,30 @@ def is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
+def as_key(key, name: str = "key"):
+    """A PRNG key from ``key``: a typed key (``jax.random.key``), a legacy ``uint32`` key
+    (``jax.random.PRNGKey``), or an integer seed (Python or NumPy int, read as
+    ``jax.random.key(seed)``).
+
+    **Arguments:** ``key``: the value given; ``name``: the argument's name, for the error.
+
+    **Returns:** the key (a typed key for an int seed; a key as given otherwise).
+
+    **Raises:** :class:`InputError` naming the argument for anything else (a float, a bool, an
+    array that is not a key).
+    """
+    if isinstance(key, (bool, np.bool_)):
+        raise InputError(f"`{name}` must be a PRNG key (jax.random.key(seed)) or an int seed; got {key!r}.")
+    if isinstance(key, (int, np.integer)):
+        return jax.random.key(int(key))
+    dtype = getattr(key, "dtype", None)
+    if dtype is not None and (jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+                              or (dtype == jnp.uint32 and getattr(key, "shape", None) == (2,))):
+        return key
+    what = type(key).__name__ if dtype is None else f"an array of dtype {dtype}, shape {getattr(key, 'shape', None)}"
+    raise InputError(f"`{name}` must be a PRNG key (jax.random.key(seed)) or an int seed; got {what}.")
+
+
 def _describe_shape(shape: Sequence[int | None]) -> str:
     return "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
 

@@ -65,7 +65,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
-from .._validation import InputError, check_finite, check_shape, is_concrete
+from .._validation import InputError, as_key, check_finite, check_shape, is_concrete
 from ..filters._linalg import cholesky, cholesky_and_inverse, matmul
 from ..models import AbstractStateSpaceModel
 from ..montecarlo._result import MonteCarloResult
@@ -319,7 +319,7 @@ def _along(model, X, weights, first_step):
 
 def pcrlb(
     model: AbstractStateSpaceModel,
-    key: PRNGKeyArray,
+    key: PRNGKeyArray | ArrayLike,  # an int seed too (as_key); ArrayLike so the suite's type checker lets as_key answer
     num_runs: int,
     num_steps: int | None = None,
     *,
@@ -344,7 +344,7 @@ def pcrlb(
     **Arguments:**
 
     - ``model``: an additive-Gaussian state-space model (``R_k`` positive definite).
-    - ``key``: a PRNG key; ``num_runs``: the number of true trajectories (≥ 1; for a linear
+    - ``key``: a PRNG key or an int seed; ``num_runs``: the number of true trajectories (≥ 1; for a linear
       model the Jacobians do not depend on the state and 1 run gives the exact bound).
     - ``num_steps``: ``T`` (defaults to the model's per-step length).
     - ``mask``: optional boolean ``(T,)``, True where a measurement is taken; False drops the
@@ -362,6 +362,7 @@ def pcrlb(
     singular while the transition Jacobian varies across the true trajectories in ``Q_k``'s null
     space (``D¹¹`` infinite: no finite bound in that form), naming the model and the step.
     """
+    key = as_key(key)
     _check_common(model, first_step)
     T = _resolve_num_steps(model, num_steps)
     if not isinstance(num_runs, (int, np.integer)) or isinstance(num_runs, bool) or num_runs < 1:

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, PRNGKeyArray
 
-from .._validation import InputError, is_concrete
+from .._validation import InputError, as_key, is_concrete
 from ..filters import AbstractFilter
 from ..filters._base import FirstStep
 from ..filters._batch import CovarianceMode
@@ -129,7 +129,7 @@ def _summarize_traced(sums: _Sums, n, num_runs, confidence, shared, components, 
 
 def differentiable_monte_carlo(
     truth: AbstractStateSpaceModel,
-    key: PRNGKeyArray,
+    key: PRNGKeyArray | int,
     num_runs: int,
     *,
     num_steps: int | None = None,
@@ -195,8 +195,7 @@ def differentiable_monte_carlo(
     ``precision_warning`` False (static fields cannot hold traced counts); runs that turn
     non-finite are still excluded and reported by a warning from the device.
     """
-    if isinstance(key, (int, np.integer)):
-        raise InputError("`key` must be a PRNG key (jax.random.key(seed)), not an int.")
+    key = as_key(key)
     prep = _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, 1000, covariance,
                     detection_probability, truth_components, filter_components)
     block = prep.block

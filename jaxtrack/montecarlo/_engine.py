@@ -28,7 +28,7 @@ from jax.sharding import Mesh, PartitionSpec as P
 from jaxtyping import PRNGKeyArray, PyTree
 from tqdm.auto import tqdm
 
-from .._validation import InputError
+from .._validation import InputError, as_key
 from ._sharding import RUN_AXIS, axis_size, local_value, place
 
 # (common, value, key, start, valid) -> the block's contribution (a pytree)
@@ -124,6 +124,23 @@ def _mesh_round(block_fn, accumulate, totals, common, value, key, start, num_run
         else:
             totals = jax.vmap(accumulate, in_axes=(0, 0, None))(totals, delta, start + d * block)
     return totals
+
+
+def refuse_traced(entry: str, *trees) -> None:
+    """Raise :class:`~jaxtrack.InputError` if any leaf of ``trees`` is a tracer.
+
+    The host-loop entry points (``monte_carlo``, ``monte_carlo_sweep``, ``monte_carlo_map``) run
+    their blocks from Python (progress bar, streaming sums, devices); traced by ``jax.grad``,
+    ``jax.jit`` or ``jax.vmap`` they would fail deep inside JAX (a ``ConcretizationTypeError``
+    about ``is_fully_addressable``). This says what to use instead.
+    """
+    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(trees)):
+        raise InputError(
+            f"jaxtrack.montecarlo.{entry} runs its blocks from the host (progress bar, streaming sums) "
+            "and cannot be traced by jax.grad, jax.jit or jax.vmap: an argument is a tracer. For the "
+            "gradient of Monte Carlo statistics use jaxtrack.montecarlo.differentiable_monte_carlo "
+            "(the same statistics as one differentiable scan); otherwise call it outside the transformation."
+        )
 
 
 def run_blocks(
@@ -270,7 +287,7 @@ def _write_block(buffer, delta, start):
 
 def monte_carlo_map(
     fn: Callable[[PRNGKeyArray, Any], PyTree],
-    key: PRNGKeyArray,
+    key: PRNGKeyArray | int,
     num_runs: int,
     *,
     args: Any = (),
@@ -292,7 +309,7 @@ def monte_carlo_map(
 
     **Arguments:**
 
-    - ``fn``: ``(key, args) -> pytree``; ``key``: a PRNG key; ``num_runs``: ``M ≥ 1``.
+    - ``fn``: ``(key, args) -> pytree``; ``key``: a PRNG key or an int seed; ``num_runs``: ``M ≥ 1``.
     - ``reduce``: ``"sum"`` returns the sum over runs of every leaf (booleans and integers as
       int32 counts), accumulated in block order (bit-identical for any ``chunk_size`` and mesh);
       ``"stack"`` returns every run's output with a leading axis ``M`` (memory ``O(M)``).
@@ -311,6 +328,8 @@ def monte_carlo_map(
 
         mse = monte_carlo_map(one_run, jax.random.key(0), 2000, args=scenario) / 2000
     """
+    key = as_key(key)
+    refuse_traced("monte_carlo_map", key, args)
     if not callable(fn):
         raise InputError(f"`fn` must be callable (key, args) -> pytree; got {type(fn).__name__}.")
     if not isinstance(num_runs, int) or isinstance(num_runs, bool) or num_runs < 1:

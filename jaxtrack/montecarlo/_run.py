@@ -38,7 +38,7 @@ import numpy as np
 from jax.sharding import Mesh
 from jaxtyping import Array, ArrayLike, PRNGKeyArray
 
-from .._validation import InputError, check_shape
+from .._validation import InputError, as_key, check_shape
 from ..filters import AbstractFilter, InteractingMultipleModel, KalmanFilter, mean_step
 from ..filters._base import FirstStep
 from ..filters._batch import (
@@ -53,7 +53,7 @@ from ..models import AbstractStateSpaceModel
 from ._metrics import normalized_squared_error
 from ._result import MonteCarloResult, _key_fields, _Sums, _summarize, _zero_sums
 from ._noise import key_words, step_normals
-from ._engine import block_size_for, check_mesh, run_blocks
+from ._engine import block_size_for, check_mesh, refuse_traced, run_blocks
 from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
 from ._simulate import (
     _resolve_num_steps,
@@ -442,7 +442,7 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
 
 def monte_carlo(
     truth: AbstractStateSpaceModel,
-    key: PRNGKeyArray,
+    key: PRNGKeyArray | int,
     num_runs: int,
     *,
     num_steps: int | None = None,
@@ -501,7 +501,7 @@ def monte_carlo(
     **Arguments:**
 
     - ``truth``: the model that generates the data.
-    - ``key``: a PRNG key; ``num_runs``: the number of runs ``M``.
+    - ``key``: a PRNG key, or an int seed (``jax.random.key(seed)``); ``num_runs``: the number of runs ``M``.
     - ``num_steps``: ``T`` (defaults to the models' per-step length).
     - ``filter``, ``filter_model``: the estimator and the model it assumes (may differ from
       ``truth``, e.g. a wrong Q); both must have the truth's state and measurement sizes.
@@ -536,6 +536,8 @@ def monte_carlo(
 
     **Returns:** a :class:`MonteCarloResult`.
     """
+    key = as_key(key)
+    refuse_traced("monte_carlo", key, truth, filter, filter_model, mask, detection_probability)
     prep = _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance,
                     detection_probability, truth_components, filter_components)
     filter_model, num_steps, shared = prep.filter_model, prep.num_steps, prep.shared
@@ -555,7 +557,7 @@ def monte_carlo(
 def monte_carlo_sweep(
     models: Callable[[Any], AbstractStateSpaceModel | tuple[AbstractStateSpaceModel, AbstractStateSpaceModel]],
     values: Sequence[Any] | ArrayLike,
-    key: PRNGKeyArray,
+    key: PRNGKeyArray | int,
     num_runs: int,
     *,
     num_steps: int | None = None,
@@ -600,6 +602,8 @@ def monte_carlo_sweep(
                                 num_steps=100, mesh=run_mesh(axis_name="sweep"))
         final_rmse = [float(r.rmse((0,))[-1]) for r in res]
     """
+    key = as_key(key)
+    refuse_traced("monte_carlo_sweep", key, values)
     values = list(values)
     if not values:
         raise InputError("`values` must hold at least one parameter value.")

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PRNGKeyArray
 
-from .._validation import InputError, check_covariance, check_finite, covariance_ok, is_concrete
+from .._validation import InputError, as_key, check_covariance, check_finite, covariance_ok, is_concrete
 from ..filters._base import FirstStep
 from ..filters._linalg import matmul
 from ._noise import key_words, step_normals
@@ -334,7 +334,7 @@ def _guard_traced_model(model: AbstractStateSpaceModel, out):
 
 def simulate(
     model: AbstractStateSpaceModel,
-    key: PRNGKeyArray,
+    key: PRNGKeyArray | int,
     num_steps: int | None = None,
     *,
     first_step: FirstStep = "update",
@@ -359,7 +359,7 @@ def simulate(
     run ``i`` of ``monte_carlo(..., detection_probability=P_D)`` has the detections
     ``simulate(truth, fold_in(key, i), T, detection_probability=P_D).detected``.
 
-    **Arguments:** ``model``; ``key``, a PRNG key; ``num_steps`` ``T`` (defaults to the model's
+    **Arguments:** ``model``; ``key``, a PRNG key or an int seed; ``num_steps`` ``T`` (defaults to the model's
     per-step length); ``first_step`` as in ``run_filter``; ``detection_probability``: None (every
     step detected) or a float in ``(0, 1]``, or one per step ``(T,)`` (a fixed value, not traced).
 
@@ -372,6 +372,7 @@ def simulate(
     that is not positive semidefinite, or non-finite noise covariances; under tracing the value
     checks become ``equinox`` runtime errors naming the same arguments.
     """
+    key = as_key(key)
     if not isinstance(model, AbstractStateSpaceModel):
         raise InputError(f"`model` must be a jaxtrack state-space model; got {type(model).__name__}.")
     num_steps = _resolve_num_steps(model, num_steps)
