@@ -71,3 +71,12 @@ def test_design_cli_prints_schedules_and_writes_figure(tmp_path, capsys):
     assert rows["per-step τ_k (optax)"]["J"] < rows["uniform"]["J"] / 3
     assert {"design_uniform.png", "design_gradient.png"} <= {p.name for p in tmp_path.glob("*.png")}
     assert _main(["design", "ho", "--samples", "3", "--out", str(tmp_path)]) == 2
+
+
+def test_design_unreachable_target_names_the_command_line_options(tmp_path, capsys):
+    """Issue 37: `design uniform --target 1e-9` suggested `step_factor` and `tau0`, which the
+    command line does not have."""
+    assert main(["design", "uniform", "--target", "1e-9", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "--target 1e-09 ft² is out of reach" in err and "--samples" in err, err
+    assert "J = 1062 ft²" in err  # the uniform period's own J, the nearest reachable value

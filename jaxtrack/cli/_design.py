@@ -74,8 +74,23 @@ def run(args) -> int:
     curves = [(r["design"], ho.history(tuple(r["schedule"]), args.g)) for r in rows]
 
     if args.method == "uniform":
+        from .._validation import InputError
+
         fn = lambda t: ho_plant(jnp.full(args.samples, t), g=args.g)  # noqa: E731
-        r = newton_uniform_period(fn, 5.0 / args.samples, args.target, ho.POSITION)
+        tau0 = 5.0 / args.samples
+        try:
+            r = newton_uniform_period(fn, tau0, args.target, ho.POSITION)
+        except InputError as exc:
+            if "feasible region" not in str(exc):
+                raise
+            # The library's advice (`step_factor`, `tau0`) names arguments this command does not
+            # have: say what the command line can change.
+            raise InputError(
+                f"--target {args.target:g} ft² is out of reach of Newton's iteration from the uniform period "
+                f"τ0 = {tau0:g} s, where J = {rows[0]['J']:.4g} ft² (it stepped to τ ≤ 0). Give a --target nearer "
+                "that, or more --samples; from Python, jaxtrack.design.newton_uniform_period takes `tau0` and "
+                "`step_factor`."
+            ) from None
         rows.append({"design": "Newton uniform τ (III-A)", "schedule": [float(r.taus[-1])] * args.samples,
                      "J": float(r.costs[-1]), "iterates": [float(t) for t in r.taus]})
         hist = covariance_recursion(fn(jnp.asarray(r.taus[-1])))
