@@ -393,3 +393,30 @@ def test_square_root_members_equal_covariance_members(linear_data, rb_data):
     ru, rv = run_imm(u, rb_data), run_imm(v, rb_data)
     np.testing.assert_allclose(rv.mean, ru.mean, rtol=0, atol=1e-8 * np.abs(ru.mean).max())
     np.testing.assert_allclose(rv.mode_probs, ru.mode_probs, rtol=0, atol=1e-8)
+
+
+def test_traced_markov_matrix_that_is_not_stochastic_is_flagged(linear_data):
+    """Issue 37, cause 3: a Markov matrix built under jit whose row sums to 0.95 ran with ok=True and
+    a wrong log-likelihood (the constructor checks only concrete matrices). Now ok=False, and the
+    same traced path with a valid matrix stays ok and equals the eager result."""
+    zs = jnp.asarray(linear_data[:30])
+    models = [_cv_model(0.01), _cv_model(4.0)]
+
+    @jax.jit
+    def run(P, mu):
+        imm = InteractingMultipleModel([(KalmanFilter(), m) for m in models], P, initial_probs=mu)
+        res = run_imm(imm, zs, throw=False)
+        return res.ok, res.log_likelihood
+
+    half = jnp.array([0.5, 0.5])
+    ok, ll = run(jnp.asarray(PTRANS), half)
+    assert bool(ok)
+    np.testing.assert_allclose(ll, run_imm(InteractingMultipleModel([(KalmanFilter(), m) for m in models], PTRANS),
+                                           zs).log_likelihood, rtol=1e-13)
+    short_row = jnp.asarray(PTRANS).at[0].set(jnp.array([0.90, 0.05]))  # row 0 sums to 0.95
+    negative = jnp.array([[1.1, -0.1], [0.1, 0.9]])
+    for P, mu in ((short_row, half), (negative, half), (jnp.asarray(PTRANS), jnp.array([0.6, 0.6]))):
+        assert not bool(run(P, mu)[0]), (P, mu)
+    with pytest.raises(Exception, match="not stochastic"):
+        jax.jit(lambda P: run_imm(InteractingMultipleModel([(KalmanFilter(), m) for m in models], P),
+                                  zs).log_likelihood)(short_row).block_until_ready()

@@ -82,6 +82,19 @@ def _covariance(f: AbstractFilter, C: Array) -> Array:
     return _outer_factor(C) if f.square_root else C
 
 
+# The traced twin of the constructor's concrete checks of `transition_probs` and `initial_probs`
+# (a matrix built inside jit/vmap/grad is not seen there). Tolerance 1e-6 on the sums: the dtype
+# the rows were computed in (a float32 softmax sums to 1 ± 3e-8) is not known here; a real
+# error (a row summing to 0.95) is far outside it.
+_TRACED_SUM_TOL = 1e-6
+
+
+def _probabilities_ok(P: Array, mu: Array) -> Array:
+    """Scalar bool: ``P`` row-stochastic and ``mu`` a distribution (finite, ≥ 0, sums 1 ± 1e-6)."""
+    ok = jnp.all(jnp.isfinite(P)) & jnp.all(P >= 0) & jnp.all(jnp.abs(P.sum(axis=1) - 1) <= _TRACED_SUM_TOL)
+    return ok & jnp.all(jnp.isfinite(mu)) & jnp.all(mu >= 0) & (jnp.abs(mu.sum() - 1) <= _TRACED_SUM_TOL)
+
+
 def _moment_match(weights: Array, means: Array, covs: Array) -> tuple[Array, Array]:
     """``Σ_i w_i x_i`` and ``Σ_i w_i [P_i + (x_i − x̄)(x_i − x̄)ᵀ]`` (BLK 2001 eqs. 11.6.6-8, -9).
 
@@ -280,7 +293,7 @@ class InteractingMultipleModel(eqx.Module):
             self.initial_probs,
             jnp.zeros((), dtype),
             jnp.zeros((), jnp.int32),
-            jnp.ones((), bool),
+            _probabilities_ok(self.transition_probs, self.initial_probs),
         )
 
     def _common(self, means, covs):
@@ -402,7 +415,9 @@ def _run_imm_jit(imm, z, observed, first_step, throw):
         result = eqx.error_if(
             result, ~result.ok,
             "jaxtrack: the IMM produced a non-finite mean, covariance, mode probability or "
-            "log-likelihood. Pass throw=False to get the result with ok=False instead.",
+            "log-likelihood, or its `transition_probs` / `initial_probs` (built under jit, vmap or "
+            "grad, so not checked by the constructor) are not stochastic: entries >= 0, rows "
+            "summing to 1. Pass throw=False to get the result with ok=False instead.",
         )
     return result
 
