@@ -2,8 +2,8 @@
 
 Usage::
 
-    rm -rf .cache/jax && JAXTRACK_TEST_PROFILE=/tmp/prof make test
-    python tools/suite_profile.py /tmp/prof [--tests 30]
+    rm -rf .cache/jax && JAXTRACK_TEST_PROFILE=.cache/profile make test
+    python tools/suite_profile.py .cache/profile [--tests 30]
 
 Each line of ``FOLDER/<pid>.tsv`` (written by ``tests/conftest.py`` when
 ``JAXTRACK_TEST_PROFILE=FOLDER``) is one test: nodeid, wall s, XLA compile s, trace+lower s and

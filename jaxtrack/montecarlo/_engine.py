@@ -28,7 +28,7 @@ from jax.sharding import Mesh, PartitionSpec as P
 from jaxtyping import PRNGKeyArray, PyTree
 from tqdm.auto import tqdm
 
-from .._validation import InputError, as_key
+from .._validation import InputError, as_key, is_concrete
 from ._sharding import RUN_AXIS, axis_size, local_value, place
 
 # (common, value, key, start, valid) -> the block's contribution (a pytree)
@@ -134,7 +134,7 @@ def refuse_traced(entry: str, *trees) -> None:
     ``jax.jit`` or ``jax.vmap`` they would fail deep inside JAX (a ``ConcretizationTypeError``
     about ``is_fully_addressable``). This says what to use instead.
     """
-    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(trees)):
+    if not all(is_concrete(leaf) for leaf in jax.tree_util.tree_leaves(trees)):
         raise InputError(
             f"jaxtrack.montecarlo.{entry} runs its blocks from the host (progress bar, streaming sums) "
             "and cannot be traced by jax.grad, jax.jit or jax.vmap: an argument is a tracer. For the "
