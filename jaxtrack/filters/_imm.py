@@ -20,12 +20,19 @@ with ``p_ij = P(mode j at k | mode i at k−1)`` and ``μ_i`` the mode probabili
    ``P = Σ_j μ_j [P_j + (x̂_j − x̂)(x̂_j − x̂)ᵀ]``; it is output only, never fed back.
 
 Members of different state dimension (e.g. constant velocity ``[x, y, vx, vy]`` and the
-nearly-constant turn ``[x, y, vx, vy, ω]``): the **common state** has the largest dimension
-``N`` and every member's state must be the first ``n_i`` components of it (a prefix; order the
-states so). For mixing and for the combined output a member's mean is *augmented* with
-``augment_mean[n_i:]`` and its covariance with the diagonal block ``diag(augment_var[n_i:])``
-(zero cross-covariance); after mixing, a member takes the first ``n_j`` components of the mixed
-moments (the *projection*). The defaults ``augment_mean = 0``, ``augment_var = 0`` say that a CV
+nearly-constant turn ``[x, y, vx, vy, ω]``) are mixed in a **common state** of ``N``
+components. Which common component each member component is comes from the members'
+:attr:`~jaxtrack.models.AbstractStateSpaceModel.state_layout` (:mod:`jaxtrack.models._layout`):
+the common layout is the longest member's, followed by the components the others add, and a
+member's ``vx`` is the common ``vx`` wherever the two layouts put it (a 2-D and a 3-D
+constant-velocity member: the 2-D member's ``[x, y, vx, vy]`` are common components
+``0, 1, 3, 4`` of ``[x, y, z, vx, vy, vz]``). ``state_indices=`` declares the embedding
+instead; a member without a declared layout falls back to the *prefix rule* (its state is the
+first ``n_i`` common components), which is checked against the layouts that are declared. For
+mixing and for the combined output a member's mean is *augmented* with ``augment_mean`` on the
+common components it lacks and its covariance with ``diag(augment_var)`` there (zero
+cross-covariance); after mixing, a member takes its own components of the mixed moments (the
+*projection*). The defaults ``augment_mean = 0``, ``augment_var = 0`` say that a CV
 target is a CT target with turn rate exactly 0 — the usual choice for CV + CT (e.g. Granström,
 Willett & Bar-Shalom 2015 discuss alternatives; pass your own to use them).
 
@@ -52,24 +59,86 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from .._export import Exportable
 from .._validation import InputError, check_finite, check_shape, is_concrete
 from ..models import AbstractStateSpaceModel
+from ..models._layout import common_layout
 from ._base import AbstractFilter, FirstStep, _outer_factor, prepare_measurements
 from ._linalg import cholesky
 from ._updates import symmetrize
 
 
-def _embed_mean(x: Array, aug: Array) -> Array:
-    """Member mean ``(n_i,)`` → common ``(N,)``: the extra components from ``aug``."""
-    n = x.shape[0]
-    return x if n == aug.shape[0] else jnp.concatenate([x, aug[n:].astype(x.dtype)])
+def _is_prefix(idx: tuple[int, ...]) -> bool:
+    return idx == tuple(range(len(idx)))
 
 
-def _embed_cov(P: Array, var: Array) -> Array:
-    """Member covariance ``(n_i, n_i)`` → ``(N, N)``: block-diagonal with ``diag(var[n_i:])``."""
+def _embed_mean(x: Array, aug: Array, idx: tuple[int, ...]) -> Array:
+    """Member mean ``(n_i,)`` → common ``(N,)``: component ``j`` at ``idx[j]``, the rest from ``aug``."""
+    n, N = x.shape[0], aug.shape[0]
+    if _is_prefix(idx):  # the common case (CV + turn models): slices, no scatter
+        return x if n == N else jnp.concatenate([x, aug[n:].astype(x.dtype)])
+    return aug.astype(x.dtype).at[np.asarray(idx)].set(x)
+
+
+def _embed_cov(P: Array, var: Array, idx: tuple[int, ...]) -> Array:
+    """Member covariance ``(n_i, n_i)`` → ``(N, N)``: ``P`` on ``idx``, ``diag(var)`` elsewhere, 0 across."""
     n, N = P.shape[0], var.shape[0]
-    if n == N:
+    if n == N and _is_prefix(idx):
         return P
-    out = jnp.zeros((N, N), P.dtype).at[:n, :n].set(P)
-    return out.at[n:, n:].set(jnp.diag(var[n:].astype(P.dtype)))
+    if _is_prefix(idx):
+        out = jnp.zeros((N, N), P.dtype).at[:n, :n].set(P)
+        return out.at[n:, n:].set(jnp.diag(var[n:].astype(P.dtype)))
+    rest = np.setdiff1d(np.arange(N), idx)
+    out = jnp.zeros((N, N), P.dtype).at[np.ix_(idx, idx)].set(P)
+    return out.at[rest, rest].set(var[rest].astype(P.dtype))
+
+
+def _project(x: Array, P: Array, idx: tuple[int, ...]) -> tuple[Array, Array]:
+    """Common moments ``(N,)``, ``(N, N)`` → a member's components ``idx``."""
+    if _is_prefix(idx):
+        n = len(idx)
+        return x[:n], P[:n, :n]
+    i = np.asarray(idx)
+    return x[i], P[np.ix_(i, i)]
+
+
+def _project_columns(P: Array, idx: tuple[int, ...]) -> Array:
+    """The columns ``idx`` of a common ``(N, N)`` matrix: ``(N, n_i)``."""
+    return P[:, : len(idx)] if _is_prefix(idx) else P[:, np.asarray(idx)]
+
+
+def _member_indices(models, state_indices) -> tuple[tuple[tuple[int, ...], ...], tuple[str, ...] | None, int]:
+    """Where each member's components sit in the common state: ``(indices, common layout, N)``.
+
+    Declared ``state_indices`` win; else the members' layouts when all declare one; else the
+    prefix rule, checked against the layouts that are declared.
+    """
+    dims = [m.state_dim for m in models]
+    if state_indices is not None:
+        idx = tuple(tuple(int(i) for i in row) for row in state_indices)
+        if len(idx) != len(models):
+            raise InputError(f"`state_indices` must hold one index tuple per member ({len(models)}); got {len(idx)}.")
+        for j, (row, n) in enumerate(zip(idx, dims)):
+            if len(row) != n or len(set(row)) != n or min(row) < 0:
+                raise InputError(f"`state_indices[{j}]` must be {n} distinct non-negative indices (member {j}'s "
+                                 f"state has {n} components); got {row}.")
+        N = max(max(row) for row in idx) + 1
+        missing = set(range(N)) - set().union(*map(set, idx))
+        if missing:
+            raise InputError(f"`state_indices` leave common components {sorted(missing)} to no member.")
+        return idx, None, N
+    layouts = [m.state_layout for m in models]
+    if all(lay is not None for lay in layouts):
+        common, idx = common_layout(layouts)
+        return idx, common, len(common)
+    N = max(dims)
+    known = [(j, lay) for j, lay in enumerate(layouts) if lay is not None]
+    longest = max((lay for _, lay in known), key=len, default=())
+    for j, lay in known:
+        if lay != longest[: len(lay)]:
+            raise InputError(
+                f"`members[{j}]`'s state {lay} is not a prefix of {longest}, and a member without a "
+                f"declared state layout makes the IMM use the prefix rule (module docstring): declare "
+                f"every member's layout (e.g. LinearTransition(..., state_layout=...)) or pass state_indices."
+            )
+    return tuple(tuple(range(n)) for n in dims), None, N
 
 
 def _native_cov(f: AbstractFilter, P: Array) -> Array:
@@ -168,12 +237,19 @@ class InteractingMultipleModel(eqx.Module):
       stochastic under gradient steps.
     - ``initial_probs``: the mode probabilities ``(M,)`` where the priors sit (``first_step``:
       at the first measurement, or one transition before it). Default uniform.
-    - ``augment_mean``, ``augment_var``: ``(N,)``, only for members of different dimension: the
-      mean and variance given to the components a smaller member lacks (module docstring;
+    - ``augment_mean``, ``augment_var``: ``(N,)``, only for members of different layouts: the
+      mean and variance given to the common components a member lacks (module docstring;
       default 0 and 0).
+    - ``state_indices``: optional, one tuple per member: ``state_indices[j][c]`` is the common
+      component of member ``j``'s component ``c`` (declares the embedding; default: derived from
+      the members' ``state_layout``, module docstring).
+
+    The common state's layout is ``state_layout`` (None when not derived from layouts) and the
+    embedding ``member_indices``.
 
     **Raises:** ``InputError`` naming the argument: not a (filter, model) pair, different
-    measurement dimensions, a state that is not the prefix-compatible size,
+    measurement dimensions, members whose layouts cannot be embedded (a declared layout that is
+    not a prefix of another while some member declares none), bad ``state_indices``,
     ``transition_probs`` not ``(M, M)``, negative, or (when concrete) rows not summing to 1,
     ``initial_probs`` not ``(M,)`` / negative / not summing to 1.
     """
@@ -184,6 +260,8 @@ class InteractingMultipleModel(eqx.Module):
     initial_probs: Float[Array, " M"]
     augment_mean: Float[Array, " N"]
     augment_var: Float[Array, " N"]
+    member_indices: tuple[tuple[int, ...], ...] = eqx.field(static=True)
+    state_layout: tuple[str, ...] | None = eqx.field(static=True)
 
     def __init__(
         self,
@@ -193,6 +271,7 @@ class InteractingMultipleModel(eqx.Module):
         *,
         augment_mean: ArrayLike | Sequence | None = None,
         augment_var: ArrayLike | Sequence | None = None,
+        state_indices: Sequence[Sequence[int]] | None = None,
     ):
         members = tuple(members)
         if len(members) == 0:
@@ -215,7 +294,7 @@ class InteractingMultipleModel(eqx.Module):
         if len(meas) > 1:
             raise InputError(f"`members`' models must share the measurement dimension; got {sorted(meas)}.")
         M = len(models)
-        N = max(m.state_dim for m in models)
+        member_indices, common, N = _member_indices(models, state_indices)
         dtype = jnp.result_type(*(m.initial_cov.dtype for m in models))
         P = jnp.asarray(transition_probs)
         given = P.dtype  # the row-sum tolerance follows the precision the rows were computed in
@@ -255,6 +334,8 @@ class InteractingMultipleModel(eqx.Module):
         self.initial_probs = mu
         self.augment_mean = am
         self.augment_var = av
+        self.member_indices = member_indices
+        self.state_layout = common
 
     @classmethod
     def from_logits(
@@ -297,8 +378,8 @@ class InteractingMultipleModel(eqx.Module):
         )
 
     def _common(self, means, covs):
-        X = jnp.stack([_embed_mean(x, self.augment_mean) for x in means])
-        P = jnp.stack([_embed_cov(c, self.augment_var) for c in covs])
+        X = jnp.stack([_embed_mean(x, self.augment_mean, i) for x, i in zip(means, self.member_indices)])
+        P = jnp.stack([_embed_cov(c, self.augment_var, i) for c, i in zip(covs, self.member_indices)])
         return X, P
 
     def step(
@@ -339,10 +420,8 @@ class InteractingMultipleModel(eqx.Module):
         log_cbar = jnp.log(jnp.where(at_start, mu, cbar))
         posts = []
         for j, (f, model) in enumerate(zip(self.filters, self.models)):
-            n = model.state_dim
-            # 2. mixed initial condition of member j (eqs. 11.6.6-8, -9), projected to its n_j.
-            x0, P0 = _moment_match(mix[:, j], X, P)
-            x0, P0 = x0[:n], P0[:n, :n]
+            # 2. mixed initial condition of member j (eqs. 11.6.6-8, -9), projected to its components.
+            x0, P0 = _project(*_moment_match(mix[:, j], X, P), self.member_indices[j])
             # 3. the member's own predict and update (eq. 11.6.6-10).
             pm, pc = f.predict(model, x0, _native_cov(f, P0), k)
             if first_step == "update":

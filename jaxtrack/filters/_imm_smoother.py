@@ -52,10 +52,10 @@ means with confidence; treat the smoothed covariances as conservative.
 With one member, (K4)–(K6) are the identity and (K1)–(K3) the (extended) RTS smoother of
 :func:`~jaxtrack.filters.rts_smoother`. Members of different state dimension: the pair ``(i, j)``
 works in the IMM's common state (member ``i``'s moments augmented as in the forward mixing, see
-:mod:`._imm`); member ``j``'s model acts on the first ``n_j`` components, the gain maps back to all
-``N`` (``G^{ij} = C (P^{ij}_{k+1/k})⁻¹`` with ``C`` the cross-covariance of the common state at
-``k`` and member ``j``'s at ``k + 1``), and member ``i``'s smoothed moments are the first ``n_i``
-components.
+:mod:`._imm`); member ``j``'s model acts on its own components (``imm.member_indices[j]``: the
+first ``n_j`` under the prefix rule), the gain maps back to all ``N`` (``G^{ij} = C
+(P^{ij}_{k+1/k})⁻¹`` with ``C`` the cross-covariance of the common state at ``k`` and member
+``j``'s at ``k + 1``), and member ``i``'s smoothed moments are its own components.
 """
 
 from __future__ import annotations
@@ -67,7 +67,9 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._validation import InputError
 from ._base import FirstStep
-from ._imm import IMMResult, InteractingMultipleModel, _covariance, _moment_match, _native_cov, run_imm
+from ._imm import (
+    IMMResult, InteractingMultipleModel, _covariance, _moment_match, _native_cov, _project, _project_columns, run_imm,
+)
 from ._smoother import _smoother_gain
 from ._updates import symmetrize
 
@@ -124,17 +126,19 @@ def _backward_step(
     # (K1)–(K3) for every pair; vmapped over the source mode i, unrolled over the target j.
     pair_means, pair_covs = [], []
     for j, (f, model) in enumerate(zip(imm.filters, imm.models)):
-        n = model.state_dim
+        idx = imm.member_indices[j]
 
-        def pair(x_i, P_i, f=f, model=model, n=n, j=j):
+        def pair(x_i, P_i, f=f, model=model, idx=idx, j=j):
             # (K1) member i's filtered estimate through member j's model, by j's own predict
             # (the same arithmetic as the forward pass: one member reproduces its filter).
-            pm, pc = f.predict(model, x_i[:n], _native_cov(f, P_i[:n, :n]), k + 1)
+            x_j, P_jj = _project(x_i, P_i, idx)
+            pm, pc = f.predict(model, x_j, _native_cov(f, P_jj), k + 1)
             pc = _covariance(f, pc)
-            F = model.transition_jacobian(x_i[:n], k + 1)
-            # (K2) cross-covariance of the common state at k with member j's at k+1, C = P_i[:, :n] Φ_jᵀ;
-            # G = C pc⁻¹ (pseudo-inverse when pc is singular) via _smoother_gain(I, Cᵀ, pc).
-            C = P_i[:, :n] @ F.T
+            F = model.transition_jacobian(x_j, k + 1)
+            # (K2) cross-covariance of the common state at k with member j's at k+1,
+            # C = P_i[:, idx_j] Φ_jᵀ; G = C pc⁻¹ (pseudo-inverse when pc is singular) via
+            # _smoother_gain(I, Cᵀ, pc).
+            C = _project_columns(P_i, idx) @ F.T
             G = _smoother_gain(jnp.eye(N, dtype=P_i.dtype), C.T, pc)
             # (K3)
             mean = x_i + G @ (next_means[j] - pm)
@@ -156,11 +160,10 @@ def _backward_step(
     mu_s = mu_s / jnp.sum(mu_s)  # Σ_i = Σ_j μ^j_{k+1/T} = 1 analytically; remove the rounding
     w = jnp.where(row[:, None] > 0, _safe_ratio(a, row[:, None]), p)
     means, covs = [], []
-    for i, model in enumerate(imm.models):
-        m_i, P_i = _moment_match(w[i], pair_means[i], pair_covs[i])
-        n = model.state_dim
-        means.append(m_i[:n])
-        covs.append(P_i[:n, :n])
+    for i in range(imm.num_modes):
+        m_i, P_i = _project(*_moment_match(w[i], pair_means[i], pair_covs[i]), imm.member_indices[i])
+        means.append(m_i)
+        covs.append(P_i)
     # (K6) the combined output, members re-augmented as in the forward combination.
     Xs, Ps = imm._common(means, covs)
     mean, cov = _moment_match(mu_s, Xs, Ps)

@@ -28,7 +28,7 @@ the prior, biases) is an array leaf of the Module; static fields hold sizes and 
 from __future__ import annotations
 
 import abc
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -37,6 +37,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._validation import InputError, check_covariance, check_finite, check_shape
+from ._layout import check_layout
 
 
 def wrap_angle(angle: ArrayLike) -> Array:
@@ -251,6 +252,14 @@ class AbstractStateSpaceModel(eqx.Module):
         return self.initial_mean.shape[-1]
 
     @property
+    def state_layout(self) -> tuple[str, ...] | None:
+        """What each state component is (e.g. ``("x", "y", "vx", "vy")``), or None if not declared.
+
+        See :mod:`jaxtrack.models._layout`; IMM members are embedded in the common state by it.
+        """
+        return None
+
+    @property
     def meas_dim(self) -> int:
         return self.measurement_noise_cov(0).shape[-1]
 
@@ -271,6 +280,9 @@ class LinearGaussianModel(AbstractStateSpaceModel):
       observer's displacement in a relative-state bearings-only model).
     - ``angle_components``: indices of measurement components that are angles (radians); their
       residuals are wrapped to (−π, π].
+    - ``state_layout``: optional names of the ``n`` state components, e.g. ``("x", "y", "vx",
+      "vy")`` (:mod:`jaxtrack.models._layout`; set by :func:`~jaxtrack.models.constant_velocity`
+      and the other kinematic builders); IMM members are embedded in the common state by it.
 
     Units are the caller's; the library only requires them to be consistent (SI and radians in
     all built-in models, except Ho's plant in feet).
@@ -289,6 +301,7 @@ class LinearGaussianModel(AbstractStateSpaceModel):
     initial_cov: Float[Array, "n n"]
     b: Float[Array, "*T n"] | None
     angle_components: tuple[int, ...] = eqx.field(static=True)
+    _layout: tuple[str, ...] | None = eqx.field(static=True, default=None)
 
     def __init__(
         self,
@@ -301,6 +314,7 @@ class LinearGaussianModel(AbstractStateSpaceModel):
         *,
         transition_offset: ArrayLike | None = None,
         angle_components: tuple[int, ...] = (),
+        state_layout: Sequence | None = None,
     ):
         F, Q, H, R, m0, P0 = _as_float_arrays(
             transition_matrix, process_noise_cov, measurement_matrix, measurement_noise_cov, initial_mean,
@@ -327,6 +341,7 @@ class LinearGaussianModel(AbstractStateSpaceModel):
         self.initial_cov = P0
         self.b = b
         self.angle_components = tuple(int(i) for i in angle_components)
+        self._layout = check_layout("state_layout", state_layout, n)
         _num_steps_of(
             transition_matrix=(F, 2),
             process_noise_cov=(Q, 2),
@@ -342,6 +357,10 @@ class LinearGaussianModel(AbstractStateSpaceModel):
     @property
     def meas_dim(self) -> int:
         return self.H.shape[-2]
+
+    @property
+    def state_layout(self) -> tuple[str, ...] | None:
+        return self._layout
 
     def check_functions(self) -> None:
         """Nothing to trace: the shapes of ``F``, ``H`` and ``b`` were checked at construction."""
@@ -437,6 +456,7 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
         self.transition_jacobian_fn = transition_jacobian_fn
         self.measurement_jacobian_fn = measurement_jacobian_fn
         self.angle_components = tuple(int(i) for i in angle_components)
+        self._layout = check_layout("state_layout", state_layout, n)
         _num_steps_of(process_noise_cov=(Q, 2), measurement_noise_cov=(R, 2))
 
     @property

@@ -58,6 +58,15 @@ class AbstractTransitionModel(eqx.Module):
         """Steps covered by per-step parameters, or ``None`` if time-invariant."""
         return None
 
+    @property
+    def state_layout(self) -> tuple[str, ...] | None:
+        """What each state component is, e.g. ``("x", "y", "vx", "vy")``; None if not declared.
+
+        See :mod:`jaxtrack.models._layout` for the names. Sensors and IMM members are checked
+        against it (:class:`TrackingModel`, :class:`~jaxtrack.filters.InteractingMultipleModel`).
+        """
+        return None
+
 
 class AbstractMeasurementModel(eqx.Module):
     """A sensor model ``z_k = h_k(x_k) + v_k``, ``v_k ~ N(0, R_k)``.
@@ -91,6 +100,13 @@ class AbstractMeasurementModel(eqx.Module):
         """Steps covered by per-step parameters, or ``None`` if time-invariant."""
         return None
 
+    def check_state_layout(self, layout: tuple[str, ...]) -> None:
+        """Raise ``InputError`` if this sensor cannot read a state of ``layout`` (default: no check).
+
+        Called by :class:`TrackingModel` with the transition model's
+        :attr:`~AbstractTransitionModel.state_layout` when it is declared.
+        """
+
 
 class TrackingModel(AbstractStateSpaceModel):
     """A state-space model assembled from a transition model, a measurement model and a prior.
@@ -103,10 +119,12 @@ class TrackingModel(AbstractStateSpaceModel):
       set by the filter's ``first_step``, see :mod:`jaxtrack.models`).
 
     The model's Jacobians are the components' (analytic where they provide them), and its
-    ``angle_components`` are the measurement model's.
+    ``angle_components`` are the measurement model's. Its ``state_layout`` is the transition
+    model's; when declared, the measurement model is checked against it
+    (:meth:`AbstractMeasurementModel.check_state_layout`: e.g. a 3-D radar on a 2-D state).
 
-    **Raises:** ``InputError`` naming the argument on a wrong type, shape or a non-finite or
-    non-positive-definite prior.
+    **Raises:** ``InputError`` naming the argument on a wrong type, shape, a non-finite or
+    non-positive-definite prior, or a sensor that reads the wrong state components.
     """
 
     transition_model: AbstractTransitionModel
@@ -137,6 +155,9 @@ class TrackingModel(AbstractStateSpaceModel):
         check_shape("initial_cov", P0, [(n, n)])
         check_finite("initial_mean", m0)
         check_covariance("initial_cov", P0)
+        layout = transition.state_layout
+        if layout is not None:
+            measurement.check_state_layout(layout)
         self.transition_model = transition
         self.measurement_model = measurement
         self.initial_mean = m0
@@ -156,6 +177,10 @@ class TrackingModel(AbstractStateSpaceModel):
     @property
     def meas_dim(self) -> int:
         return self.measurement_model.meas_dim
+
+    @property
+    def state_layout(self) -> tuple[str, ...] | None:
+        return self.transition_model.state_layout
 
     def transition(self, x, k):
         return self.transition_model.mean(x, k)

@@ -24,6 +24,7 @@ from jaxtyping import Array, ArrayLike, Float
 from .._validation import InputError, check_finite, check_shape, is_concrete
 from ._base import LinearGaussianModel
 from ._discretize import check_taus, discretize
+from ._layout import kinematic_layout
 
 # --------------------------------------------------------------------------------------------
 # helpers
@@ -85,7 +86,7 @@ def _position_model(F1, Q1, q, dim, order, measurement_std, initial_mean, initia
         initial_mean = jnp.zeros((n,), dtype)
     if initial_cov is None:
         raise InputError(f"`initial_cov` is required: the prior covariance, shape ({n}, {n}).")
-    return LinearGaussianModel(F, Q, H, R, initial_mean, initial_cov)
+    return LinearGaussianModel(F, Q, H, R, initial_mean, initial_cov, state_layout=kinematic_layout(dim, order))
 
 
 # --------------------------------------------------------------------------------------------

@@ -68,6 +68,7 @@ from ._base import _num_steps_of, at_step
 from ._components import AbstractTransitionModel
 from ._discretize import check_taus
 from ._kinematic import _ca_blocks, _check_nonneg, _cv_blocks, _kron_diag
+from ._layout import TURN_RATE, check_layout, kinematic_layout, num_axes, shift_axes
 
 # --------------------------------------------------------------------------------------------
 # helpers
@@ -194,15 +195,21 @@ class LinearTransition(AbstractTransitionModel):
       step ``k``).
     - ``process_noise_cov``: ``Q``, shape ``(n, n)`` or ``(T, n, n)``, symmetric positive
       semidefinite, in the state's units squared.
+    - ``state_layout``: optional names of the ``n`` state components (keyword), e.g.
+      ``("x", "y", "vx", "vy")`` (:mod:`jaxtrack.models._layout`); sensors and IMM members are
+      checked against it. None: not declared, nothing checked.
 
     **Raises:** ``InputError`` naming the argument on a wrong shape, non-finite ``F`` or a ``Q``
-    that is not a covariance, or a disagreeing number of steps.
+    that is not a covariance, a disagreeing number of steps, or a ``state_layout`` that does not
+    name ``n`` distinct components.
     """
 
     F: Float[Array, "*T n n"]
     Q: Float[Array, "*T n n"]
+    _layout: tuple[str, ...] | None = eqx.field(static=True, default=None)
 
-    def __init__(self, transition_matrix: ArrayLike, process_noise_cov: ArrayLike):
+    def __init__(self, transition_matrix: ArrayLike, process_noise_cov: ArrayLike, *,
+                 state_layout: Sequence | None = None):
         F, Q = jnp.asarray(transition_matrix), jnp.asarray(process_noise_cov)
         dtype = jnp.result_type(F, Q, float)
         F, Q = F.astype(dtype), Q.astype(dtype)
@@ -214,10 +221,15 @@ class LinearTransition(AbstractTransitionModel):
         check_covariance("process_noise_cov", Q, definite=False)
         _num_steps_of(transition_matrix=(F, 2), process_noise_cov=(Q, 2))
         self.F, self.Q = F, Q
+        self._layout = check_layout("state_layout", state_layout, n)
 
     @property
     def state_dim(self) -> int:
         return self.F.shape[-1]
+
+    @property
+    def state_layout(self) -> tuple[str, ...] | None:
+        return self._layout
 
     @property
     def num_steps(self) -> int | None:
@@ -262,6 +274,11 @@ class _AbstractKinematic(AbstractTransitionModel):
     @property
     def state_dim(self) -> int:
         return self._order * self.dim
+
+    @property
+    def state_layout(self) -> tuple[str, ...]:
+        """``[positions…, velocities…(, accelerations…)]``, e.g. ``("x", "y", "vx", "vy")``."""
+        return kinematic_layout(self.dim, self._order)
 
     def transition_matrix(self, k: Int[ArrayLike, ""]) -> Float[Array, "n n"]:
         """``F_k = F_1d(τ_k) ⊗ I_d``."""
@@ -392,6 +409,11 @@ class CoordinatedTurn(AbstractTransitionModel):
         return 2 * self.dim
 
     @property
+    def state_layout(self) -> tuple[str, ...]:
+        """``("x", "y", "vx", "vy")`` or ``("x", "y", "z", "vx", "vy", "vz")``."""
+        return kinematic_layout(self.dim, 2)
+
+    @property
     def num_steps(self) -> int | None:
         return _steps(turn_rate=self.turn_rate, sample_period=self.sample_period)
 
@@ -472,6 +494,11 @@ class NearlyConstantTurn(AbstractTransitionModel):
     @property
     def state_dim(self) -> int:
         return 5
+
+    @property
+    def state_layout(self) -> tuple[str, ...]:
+        """``("x", "y", "vx", "vy", "omega")``."""
+        return kinematic_layout(2, 2) + (TURN_RATE,)
 
     @property
     def num_steps(self) -> int | None:
@@ -596,6 +623,31 @@ class BlockTransition(AbstractTransitionModel):
     @property
     def state_dim(self) -> int:
         return sum(b.state_dim for b in self.blocks)
+
+    @property
+    def state_layout(self) -> tuple[str, ...] | None:
+        """The blocks' layouts, each block's axes after the previous blocks' (None if one is unknown).
+
+        A block does not know which axes it moves: block ``i``'s ``x`` is the first axis after
+        those of blocks ``0 … i−1`` (a 2-D turn then ``ConstantVelocity(dim=1)``: the latter's
+        ``x``, ``vx`` are ``z``, ``vz``), and ``order`` places the concatenated components.
+        """
+        u, offset = [], 0
+        for b in self.blocks:
+            lay = b.state_layout
+            lay = None if lay is None else shift_axes(lay, offset)
+            if lay is None:
+                return None
+            u.extend(lay)
+            offset += num_axes(b.state_layout)
+        if len(set(u)) != len(u):
+            return None  # two blocks name the same component: not a layout we can interpret
+        if self.order is None:
+            return tuple(u)
+        out = [""] * len(u)
+        for i, j in enumerate(self.order):  # u[i] = x[order[i]]
+            out[j] = u[i]
+        return tuple(out)
 
     @property
     def num_steps(self) -> int | None:

@@ -58,6 +58,8 @@ from .._validation import InputError, check_covariance, check_finite, check_shap
 from ..geometry import rotation_x, rotation_y, rotation_z
 from ._base import _num_steps_of, at_step, wrap_angle
 from ._components import AbstractMeasurementModel
+from ._layout import AXES, indices_of
+from ._layout import position_indices as position_indices_of
 
 __all__ = ["RangeBearing", "Bearing", "RangeAzimuthElevation", "sensor_rotation"]
 
@@ -268,6 +270,32 @@ class _AbstractSensor(AbstractMeasurementModel):
             bias=(self.bias, 1),
             **self._orientation_arrays(),
         )
+
+    def check_state_layout(self, layout: tuple[str, ...]) -> None:
+        """``InputError`` unless ``position_indices`` read the positions ``x, y(, z)`` of ``layout``
+        (and, with ``range_rate``, ``velocity_indices`` the velocities ``vx, vy(, vz)``).
+
+        A layout that names no position (a state of other quantities) is not checked.
+        """
+        d = len(self.position_indices)
+        checks = [("position_indices", self.position_indices, AXES[:d])]
+        if self.range_rate:
+            checks.append(("velocity_indices", self.velocity_indices, tuple("v" + a for a in AXES[:d])))
+        for name, idx, want in checks:
+            if not any(c in layout for c in want):
+                continue
+            if max(idx) >= len(layout):
+                raise InputError(f"`{name}` {idx} do not fit the state of {len(layout)} components {layout}.")
+            got = tuple(layout[i] for i in idx)
+            if got != want:
+                where = indices_of(layout, want)
+                fix = (f"pass {name}={where}" if where is not None else
+                       f"the state has no {want}: use a {d}-axis motion model or a sensor of "
+                       f"{len(position_indices_of(layout))} axes")
+                raise InputError(
+                    f"{type(self).__name__}'s `{name}` {idx} read {got} of the state {layout}; a "
+                    f"{d}-axis sensor needs {want} ({fix})."
+                )
 
     def _check_state(self, x: Array) -> None:
         # Static: an out-of-range index would be clamped silently by jnp indexing.
