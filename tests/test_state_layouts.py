@@ -70,6 +70,26 @@ def test_kinematic_builders_declare_their_layout():
     assert ca.state_layout == ("x", "y", "vx", "vy", "ax", "ay")
 
 
+def _f(x, k):
+    return x
+
+
+def _h(x, k):
+    return x[:2]
+
+
+def test_linear_and_nonlinear_models_take_a_declared_layout():
+    lgm = constant_velocity(1.0, accel_psd=1.0, measurement_std=1.0, initial_cov=np.eye(4))
+    from jaxtrack.models import LinearGaussianModel, NonlinearGaussianModel
+
+    args = (np.eye(4), np.eye(2), np.zeros(4), np.eye(4))
+    assert NonlinearGaussianModel(_f, _h, *args).state_layout is None
+    assert NonlinearGaussianModel(_f, _h, *args, state_layout=CV2).state_layout == CV2
+    assert LinearGaussianModel(lgm.F, lgm.Q, lgm.H, lgm.R, lgm.initial_mean, lgm.initial_cov).state_layout is None
+    with pytest.raises(InputError, match="state_layout"):
+        NonlinearGaussianModel(_f, _h, *args, state_layout=("x", "y"))
+
+
 @pytest.mark.parametrize("bad", [("x", "y"), ("x", "x", "vx", "vy"), "xyvv", (0, 1, 2, 3)])
 def test_declared_layout_is_validated(bad):
     with pytest.raises(InputError, match="state_layout"):

@@ -411,6 +411,8 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
     - ``transition_jacobian_fn``, ``measurement_jacobian_fn``: optional analytic Jacobians with the
       same signature as ``f`` and ``h``; ``jax.jacfwd`` is used when they are not given.
     - ``angle_components``: measurement indices that are angles (radians), wrapped to (−π, π].
+    - ``state_layout``: optional names of the ``n`` state components (as for
+      :class:`LinearGaussianModel`).
 
     !!! note
         The callables are compared by identity under ``jit``: define them once (a ``def`` at
@@ -428,6 +430,7 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
     transition_jacobian_fn: Callable | None = eqx.field(static=True)
     measurement_jacobian_fn: Callable | None = eqx.field(static=True)
     angle_components: tuple[int, ...] = eqx.field(static=True)
+    _layout: tuple[str, ...] | None = eqx.field(static=True, default=None)
 
     def __init__(
         self,
@@ -441,6 +444,7 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
         transition_jacobian_fn: Callable | None = None,
         measurement_jacobian_fn: Callable | None = None,
         angle_components: tuple[int, ...] = (),
+        state_layout: Sequence | None = None,
     ):
         Q, R, m0, P0 = _as_float_arrays(process_noise_cov, measurement_noise_cov, initial_mean, initial_cov)
         for name, fn in (("transition_fn", transition_fn), ("measurement_fn", measurement_fn)):
@@ -456,12 +460,16 @@ class NonlinearGaussianModel(AbstractStateSpaceModel):
         self.transition_jacobian_fn = transition_jacobian_fn
         self.measurement_jacobian_fn = measurement_jacobian_fn
         self.angle_components = tuple(int(i) for i in angle_components)
-        self._layout = check_layout("state_layout", state_layout, n)
+        self._layout = check_layout("state_layout", state_layout, m0.shape[0])
         _num_steps_of(process_noise_cov=(Q, 2), measurement_noise_cov=(R, 2))
 
     @property
     def num_steps(self) -> int | None:
         return _num_steps_of(Q=(self.Q, 2), R=(self.R, 2))
+
+    @property
+    def state_layout(self) -> tuple[str, ...] | None:
+        return self._layout
 
     def _function_specs(self, n: int, m: int):
         specs = [("transition_fn", self.transition_fn, (n,)), ("measurement_fn", self.measurement_fn, (m,))]
