@@ -32,7 +32,7 @@ from jaxtrack.montecarlo import MonteCarloResult, monte_carlo
 ARRAY_FIELDS = ("mse", "mean_error", "nees", "nees_std", "nees_bounds", "nis", "nis_dof", "nis_bounds",
                 "anees", "anees_bounds", "mode_probs", "key")
 STATIC_FIELDS = ("num_runs", "num_failed", "confidence", "shared_covariance", "precision_warning", "components",
-                 "key_impl")
+                 "key_impl", "filter_name", "filter_model_name", "filter_model_source")
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +154,11 @@ def test_file_is_plain_npz_with_json_meta(imm_result, tmp_path):
         np.testing.assert_array_equal(npz["mode_probs"], imm_result.mode_probs)
     assert meta == {"format_version": 1, "kind": "jaxtrack.MonteCarloResult", "num_runs": 8, "num_failed": 0,
                     "confidence": 0.95, "shared_covariance": False, "precision_warning": False,
-                    "components": [0, 1, 2, 3], "key_impl": "threefry2x32"}
+                    "components": [0, 1, 2, 3], "key_impl": "threefry2x32",
+                    "filter_name": "InteractingMultipleModel(ExtendedKalmanFilter, ExtendedKalmanFilter)",
+                    "filter_model_name": "TrackingModel(ConstantVelocity, RangeBearing), "
+                                         "TrackingModel(NearlyConstantTurn, RangeBearing)",
+                    "filter_model_source": "imm"}
     # the study's key travels with the result: wrap it back and it is the key the fixture used
     key = jax.random.wrap_key_data(npz_key := np.load(tmp_path / "r.npz")["key"], impl=meta["key_impl"])
     assert npz_key.dtype == np.uint32

@@ -84,14 +84,16 @@ def _warn_failed(num_failed, num_total):
             RuntimeWarning, stacklevel=2)
 
 
-def _summarize_traced(sums: _Sums, n, num_runs, confidence, shared, components, key) -> MonteCarloResult:
+def _summarize_traced(sums: _Sums, n, num_runs, confidence, shared, components, key,
+                      estimator=None) -> MonteCarloResult:
     """:func:`~jaxtrack.montecarlo._result._summarize` for traced sums: the same formulas.
 
     The statistics divide by the (traced) count of finite runs, exactly as ``monte_carlo`` does.
     The χ² bounds (scipy quantiles: no gradient) come from a ``pure_callback`` on stopped
     gradients. The static fields ``num_runs``/``num_failed``/``precision_warning`` are exact when
     the call is not traced; under a trace they are ``num_runs`` requested, 0 and False, and a
-    failed run is reported by a ``jax.debug.callback`` warning.
+    failed run is reported by a ``jax.debug.callback`` warning. ``estimator``: the static
+    ``filter_name``/``filter_model_name``/``filter_model_source`` (strings: unaffected by a trace).
     """
     num_ok = sums.num_ok
     dtype = sums.nees.dtype
@@ -124,6 +126,7 @@ def _summarize_traced(sums: _Sums, n, num_runs, confidence, shared, components, 
         precision_warning=suspect,
         components=components,
         **_key_fields(key),
+        **(estimator or {}),
     )
 
 
@@ -212,7 +215,8 @@ def differentiable_monte_carlo(
     zero = _zero_sums(prep.num_steps, prep.num_scored, truth.initial_cov.dtype, num_modes=prep.num_modes)
     sums = _scan_blocks_jit(common_dyn, models_dyn, key, (common_static, models_static), num_runs, block,
                             math.ceil(num_runs / block), zero)
-    return _summarize_traced(sums, prep.num_scored, num_runs, confidence, prep.shared, prep.components[1], key)
+    return _summarize_traced(sums, prep.num_scored, num_runs, confidence, prep.shared, prep.components[1], key,
+                             prep.estimator)
 
 
 # Compiled once per (static structure, sizes); inside an outer trace the jit is inlined.

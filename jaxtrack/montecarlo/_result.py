@@ -71,6 +71,17 @@ class MonteCarloResult(Exportable, eqx.Module):
       (``jax.random.key_data``), and ``key_impl``: its implementation's name (e.g.
       ``"threefry2x32"``); ``jax.random.wrap_key_data(result.key, impl=result.key_impl)`` gives
       the key back, so a saved result says how to rerun it. None when not set by the caller.
+    - ``filter_name``: the estimator's class name (``"KalmanFilter"``, ``"ExtendedKalmanFilter"``…);
+      for an IMM its members' too, ``"InteractingMultipleModel(KalmanFilter, ExtendedKalmanFilter)"``.
+    - ``filter_model_name``: the class name of the model the filter ran, with a
+      :class:`~jaxtrack.models.TrackingModel`'s transition and measurement classes
+      (``"TrackingModel(CoordinatedTurn, RangeBearing)"``, ``"LinearGaussianModel"``); for an IMM
+      its members' models, comma-separated, in member order.
+    - ``filter_model_source``: where that model came from: ``"truth"`` (no ``filter_model`` was
+      given, so the filter ran the truth's own model: a matched, best-case filter that knows
+      every parameter of the truth, a known turn schedule included), ``"given"`` (the
+      ``filter_model`` passed) or ``"imm"`` (the IMM's own member models).
+      These three are None in a result saved before they were recorded (its file still loads).
 
     **Export** (:mod:`jaxtrack._export`): :meth:`to_dict` (NumPy arrays or JSON-ready lists),
     :meth:`save` to one ``.npz`` and :meth:`load` back, bit for bit (both carry
@@ -97,6 +108,11 @@ class MonteCarloResult(Exportable, eqx.Module):
     components: tuple[int, ...] | None = eqx.field(static=True, default=None)
     key: UInt32[Array, " k"] | None = None
     key_impl: str | None = eqx.field(static=True, default=None)
+    # Static strings, not leaves: they name the estimator, and being part of the tree structure
+    # they pass through jit, vmap and grad (differentiable_monte_carlo) untouched.
+    filter_name: str | None = eqx.field(static=True, default=None)
+    filter_model_name: str | None = eqx.field(static=True, default=None)
+    filter_model_source: str | None = eqx.field(static=True, default=None)
 
     _export_kind = "jaxtrack.MonteCarloResult"
     _export_dims = {
@@ -125,6 +141,57 @@ class MonteCarloResult(Exportable, eqx.Module):
         """Fraction of steps whose run-averaged NEES lies within its bounds (≈ confidence)."""
         inside = (self.nees >= self.nees_bounds[:, 0]) & (self.nees <= self.nees_bounds[:, 1])
         return jnp.mean(inside)
+
+    def summary(self) -> str:
+        """A short plain-text report of the study: runs, consistency, accuracy and the estimator.
+
+        One line each: the runs (and how many failed), the ANEES against its bounds, the RMSE at
+        the last step over all scored components (and the final mean mode probabilities of an
+        IMM), and which filter ran on which model. When the filter ran the truth's own model
+        (``filter_model_source == "truth"``) that line says so: such a filter is matched, a
+        best case, and ``filter_model=`` gives the mismatched study.
+
+        For a result with concrete arrays (not one traced inside ``jax.grad``/``jax.jit`` or a
+        ``vmap``-ed batch of results). **Returns:** the text, lines separated by ``"\\n"``.
+        """
+        num_steps, n = self.mse.shape[-2], self.mse.shape[-1]
+        anees, (lo, hi) = float(self.anees), (float(b) for b in self.anees_bounds)
+        if lo <= anees <= hi:
+            verdict = "inside (consistent)"
+        elif anees > hi:
+            verdict = "ABOVE the upper bound (the filter's covariance is too small: optimistic)"
+        else:
+            verdict = "below the lower bound (the filter's covariance is too large: pessimistic)"
+        scored = "the whole state" if self.components is None else f"components {list(self.components)}"
+        lines = [
+            f"Monte Carlo: {self.num_runs} runs ({self.num_failed} failed, left out), {num_steps} steps, "
+            f"{n} scored components ({scored}).",
+            f"ANEES {anees:.4g}, {self.confidence:.0%} bounds [{lo:.4g}, {hi:.4g}]: {verdict}.",
+            f"Final-step RMSE over the {n} scored components: {float(self.rmse()[-1]):.4g} (state units).",
+        ]
+        if self.mode_probs is not None:
+            probs = ", ".join(f"{float(p):.3f}" for p in self.mode_probs[-1])
+            lines.append(f"Final mean mode probabilities: {probs}.")
+        if self.precision_warning:
+            lines.append("Precision warning: statistics in float32 far outside their bounds; rerun in float64.")
+        lines.append(self._estimator_line())
+        return "\n".join(lines)
+
+    def _estimator_line(self) -> str:
+        """The summary's line naming the filter and the model it ran, and what that means."""
+        filt, model = self.filter_name or "an unrecorded filter", self.filter_model_name or "an unrecorded model"
+        if self.filter_model_source == "truth":
+            # Issue 37: a default filter model is the truth itself, so the filter knows what a real
+            # one cannot (a turn schedule, the exact noise): say so where the numbers are read.
+            return (f"Estimator: {filt} on {model}, the truth's own model (no filter_model given): a matched, "
+                    "best-case filter that knows every parameter of the truth, including any known turn "
+                    "schedule; pass filter_model= for a mismatched study.")
+        if self.filter_model_source == "given":
+            return (f"Estimator: {filt} on {model}, the filter_model given (its own assumptions, which may "
+                    "differ from the truth).")
+        if self.filter_model_source == "imm":
+            return f"Estimator: {filt} on its members' own models: {model}."
+        return "Estimator: not recorded (a result saved before jaxtrack recorded the filter and its model)."
 
 
 def _zero_sums(num_steps, n, dtype, lead=(), num_modes=0):
@@ -168,7 +235,8 @@ def _run_averages(sums: _Sums, num_ok, n) -> dict:
     )
 
 
-def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=None, key_impl=None) -> MonteCarloResult:
+def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=None, key_impl=None,
+               filter_name=None, filter_model_name=None, filter_model_source=None) -> MonteCarloResult:
     num_ok = int(sums.num_ok)
     num_failed = int(sums.num_failed)
     if num_failed:
@@ -217,6 +285,9 @@ def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=No
         components=components,
         key=key,
         key_impl=key_impl,
+        filter_name=filter_name,
+        filter_model_name=filter_model_name,
+        filter_model_source=filter_model_source,
     )
 
 

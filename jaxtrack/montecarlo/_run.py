@@ -49,7 +49,7 @@ from ..filters._batch import (
     shared_covariances,
 )
 from ..filters._linalg import all_rows, cholesky_and_inverse, marginal_cov, matmul, sum_rows
-from ..models import AbstractStateSpaceModel
+from ..models import AbstractStateSpaceModel, TrackingModel
 from ._metrics import normalized_squared_error
 from ._result import MonteCarloResult, _key_fields, _Sums, _summarize, _zero_sums
 from ._noise import key_words, step_normals
@@ -336,6 +336,7 @@ class _Prepared(NamedTuple):
     components: tuple  # (truth_components, filter_components), each None for all
     num_scored: int  # n, the scored components
     num_modes: int  # K, an IMM's modes (0 for one filter)
+    estimator: dict  # filter_name, filter_model_name, filter_model_source of the MonteCarloResult
 
 
 def _check_components(name, components, dim):
@@ -349,6 +350,29 @@ def _check_components(name, components, dim):
     if not out or len(set(out)) != len(out) or min(out) < 0 or max(out) >= dim:
         raise InputError(f"`{name}` must hold distinct state indices in [0, {dim}); got {out}.")
     return out
+
+
+def _model_name(model) -> str:
+    """A model's class name; a TrackingModel's with its transition and measurement classes, which
+    say what the filter assumed (``TrackingModel(CoordinatedTurn, RangeBearing)``: a known turn)."""
+    name = type(model).__name__
+    if isinstance(model, TrackingModel):
+        name += f"({type(model.transition_model).__name__}, {type(model.measurement_model).__name__})"
+    return name
+
+
+def _estimator_fields(filter, filter_model, given: bool) -> dict:
+    """The estimator fields of a :class:`MonteCarloResult`, from the resolved ``filter`` (the
+    default KalmanFilter filled in) and ``filter_model`` (the truth when none was given; None for
+    an IMM). ``given``: whether the caller passed a ``filter_model``: when not, the filter ran the
+    truth's own model, which the result must say (issue 37)."""
+    if isinstance(filter, InteractingMultipleModel):
+        members = ", ".join(type(f).__name__ for f in filter.filters)
+        return {"filter_name": f"{type(filter).__name__}({members})",
+                "filter_model_name": ", ".join(_model_name(m) for m in filter.models),
+                "filter_model_source": "imm"}
+    return {"filter_name": type(filter).__name__, "filter_model_name": _model_name(filter_model),
+            "filter_model_source": "given" if given else "truth"}
 
 
 def _prepare_models(truth, filter, filter_model, truth_components, filter_components):
@@ -388,8 +412,10 @@ def _prepare_models(truth, filter, filter_model, truth_components, filter_compon
 def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step, chunk_size, covariance,
              detection_probability=None, truth_components=None, filter_components=None):
     """Validate a Monte Carlo call; choose the path and the block size."""
+    given = filter_model is not None  # read before _prepare_models puts the truth in its place
     filter, filter_model, components, num_scored, num_modes = _prepare_models(
         truth, filter, filter_model, truth_components, filter_components)
+    estimator = _estimator_fields(filter, filter_model, given)
     if not isinstance(num_runs, int) or num_runs < 1:
         raise InputError(f"`num_runs` must be a positive int; got {num_runs!r}.")
     if not isinstance(chunk_size, int) or chunk_size < 1:
@@ -437,7 +463,7 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
     largest = _SHARED_BLOCK if shared else (_IMM_BLOCK if filter_model is None else _PER_RUN_BLOCK)
     block = block_size_for(num_runs, largest)
     return _Prepared(filter, filter_model, num_steps, observed, shared, block, detection, run_mask, components,
-                     num_scored, num_modes)
+                     num_scored, num_modes, estimator)
 
 
 def monte_carlo(
@@ -534,7 +560,10 @@ def monte_carlo(
     probabilities per step are streamed into ``mode_probs`` ``(T, K)``, and NIS is not scored
     (the IMM has no single innovation; ``nis`` and ``nis_dof`` are 0).
 
-    **Returns:** a :class:`MonteCarloResult`.
+    **Returns:** a :class:`MonteCarloResult`. Its ``filter_name``, ``filter_model_name`` and
+    ``filter_model_source`` say which filter ran on which model, ``"truth"`` when ``filter_model``
+    was not given (the matched, best-case filter above); :meth:`MonteCarloResult.summary` says it
+    in words.
     """
     key = as_key(key)
     refuse_traced("monte_carlo", key, truth, filter, filter_model, mask, detection_probability)
@@ -551,7 +580,8 @@ def monte_carlo(
         value=_Models(truth, filter_model, setup), key=key,
         num_runs=num_runs, block=prep.block, mesh=mesh, run_axis=mesh_axis, chunk_size=chunk_size,
         progress=progress, desc="Monte Carlo")
-    return _summarize(sums, prep.num_scored, confidence, shared, prep.components[1], **_key_fields(key))
+    return _summarize(sums, prep.num_scored, confidence, shared, prep.components[1], **_key_fields(key),
+                      **prep.estimator)
 
 
 def monte_carlo_sweep(
@@ -659,6 +689,6 @@ def monte_carlo_sweep(
         progress=progress, desc="Monte Carlo sweep")
     return [
         _summarize(jax.tree_util.tree_map(lambda a: a[j], sums), n, confidence, shared, prep.components[1],
-                   **_key_fields(key))
+                   **_key_fields(key), **preps[j].estimator)
         for j in range(num_values)
     ]
