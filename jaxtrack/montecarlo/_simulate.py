@@ -18,17 +18,28 @@ from ..models import AbstractStateSpaceModel, at_step
 
 
 class Trajectory(NamedTuple):
-    """One simulated run: ``states`` ``(T, n)``, ``measurements`` ``(T, m)`` and ``detected`` ``(T,)``.
+    """One simulated run: ``states`` ``(T, n)``, ``measurements`` ``(T, m)``, ``detected`` ``(T,)``, ``ok`` ``()``.
 
     ``detected`` is True where the sensor detected the target at that step (the whole measurement
     vector is then observed); all True unless :func:`simulate` was given a
     ``detection_probability``. ``measurements`` holds the drawn values at every step, detected or
-    not: pass ``mask=detected`` to :func:`~jaxtrack.filters.run_filter`.
+    not: pass ``mask=detected`` to :func:`~jaxtrack.filters.run_filter`. ``ok`` is False when a
+    state or measurement is not finite (e.g. a turn rate or noise level built under ``jit`` as
+    NaN, which no constructor could check); with ``simulate(..., throw=True)`` that is an error.
     """
 
     states: Float[Array, "T n"]
     measurements: Float[Array, "T m"]
     detected: Bool[Array, " T"]
+    ok: Bool[Array, ""]
+
+
+_SIMULATE_FAILED = (
+    "jaxtrack.simulate produced a non-finite state or measurement. Likely cause: a model "
+    "parameter built under jit/vmap/grad (a turn rate, sample period, noise level or sensor "
+    "position) is NaN or infinite, which the constructors check only on concrete values; or a "
+    "transition that overflows. Pass throw=False to get the Trajectory with ok=False instead."
+)
 
 
 @jax.custom_jvp
@@ -266,7 +277,7 @@ def advance(model, factors: NoiseFactors, first_step: FirstStep, x_prev, eps, k)
 
 
 @eqx.filter_jit
-def _simulate_jit(model, key, num_steps, first_step, detection_probability):
+def _simulate_jit(model, key, num_steps, first_step, detection_probability, throw=False):
     factors = noise_factors(model, num_steps)
     prior_key, steps_key = step_keys(key)
     x0 = draw_initial_state(model, factors, prior_key)
@@ -288,7 +299,11 @@ def _simulate_jit(model, key, num_steps, first_step, detection_probability):
         detected = jnp.ones((num_steps,), bool)
     else:
         detected = draw_detections(key, detection_probability, dtype)
-    return _guard_traced_model(model, Trajectory(xs, zs, detected))
+    ok = jnp.all(jnp.isfinite(xs)) & jnp.all(jnp.isfinite(zs))
+    out = Trajectory(xs, zs, detected, ok)
+    if throw:
+        out = eqx.error_if(out, ~ok, _SIMULATE_FAILED)
+    return _guard_traced_model(model, out)
 
 
 def _check_model_values(model: AbstractStateSpaceModel) -> None:
@@ -339,6 +354,7 @@ def simulate(
     *,
     first_step: FirstStep = "update",
     detection_probability: float | ArrayLike | None = None,
+    throw: bool = True,
 ) -> Trajectory:
     """Simulate one run of truth and measurements.
 
@@ -361,11 +377,14 @@ def simulate(
 
     **Arguments:** ``model``; ``key``, a PRNG key or an int seed; ``num_steps`` ``T`` (defaults to the model's
     per-step length); ``first_step`` as in ``run_filter``; ``detection_probability``: None (every
-    step detected) or a float in ``(0, 1]``, or one per step ``(T,)`` (a fixed value, not traced).
+    step detected) or a float in ``(0, 1]``, or one per step ``(T,)`` (a fixed value, not traced);
+    ``throw``: True (default) raises when a state or measurement is not finite (inside ``jit``
+    too, as ``run_filter`` does); False returns the trajectory with ``ok=False`` (use it under
+    ``vmap`` and read ``ok`` per run).
 
     **Returns:** a :class:`Trajectory` with ``states`` ``(T, n)``, ``measurements`` ``(T, m)``
-    (drawn at every step) and ``detected`` ``(T,)`` (True = detected; all True without
-    ``detection_probability``). Use ``jax.vmap`` over keys for a batch.
+    (drawn at every step), ``detected`` ``(T,)`` (True = detected; all True without
+    ``detection_probability``) and ``ok`` ``()``. Use ``jax.vmap`` over keys for a batch.
 
     **Raises:** ``InputError`` for a bad ``num_steps``, ``first_step`` or ``detection_probability``, a model function
     returning the wrong shape, or (concrete values) a non-finite prior mean, a prior covariance
@@ -383,7 +402,7 @@ def simulate(
     if detection_probability is not None:
         detection_probability = check_detection_probability(detection_probability, num_steps)
         detection_probability = jnp.asarray(detection_probability, model.initial_mean.dtype)
-    return _simulate_jit(model, key, num_steps, first_step, detection_probability)
+    return _simulate_jit(model, key, num_steps, first_step, detection_probability, bool(throw))
 
 
 def _resolve_num_steps(model, num_steps) -> int:
