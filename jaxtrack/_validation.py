@@ -32,6 +32,25 @@ def is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
+def nan_where_traced(x, bad):
+    """The traced twin of a value check: ``x`` with NaN where ``bad``, when ``x`` is traced.
+
+    A constructor checks concrete values and raises ``InputError``; under ``jit``/``vmap``/``grad``
+    it cannot see them. Rather than a second error mechanism (an ``equinox.error_if`` would raise
+    even where the caller asked for ``throw=False`` and reads ``ok`` per run), a rejected traced
+    value becomes NaN: every entry point's ``ok`` flag and its ``throw=True`` error already report
+    a non-finite result, so a value the concrete path rejects is never a silent answer. Values
+    that pass are returned unchanged (bit for bit, with their gradient).
+
+    **Arguments:** ``x``: a float array; ``bad``: a boolean array broadcastable to ``x`` (or a
+    function of ``x`` returning it). **Returns:** ``x`` (concrete) or ``where(bad, nan, x)``.
+    """
+    if is_concrete(x):
+        return x
+    bad = bad(x) if callable(bad) else bad
+    return jnp.where(bad, jnp.asarray(jnp.nan, x.dtype), x)
+
+
 def as_key(key, name: str = "key"):
     """A PRNG key from ``key``: a typed key (``jax.random.key``), a legacy ``uint32`` key
     (``jax.random.PRNGKey``), or an integer seed (Python or NumPy int, read as

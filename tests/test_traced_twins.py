@@ -30,8 +30,8 @@ KEY = jax.random.key(0)
 T = 6
 
 
-def _ct(turn_rate):
-    return TrackingModel(CoordinatedTurn(turn_rate, 1.0, 0.1), SENSOR, X0, P0)
+def _ct(turn_rate, sample_period=1.0, noise_intensity=0.1):
+    return TrackingModel(CoordinatedTurn(turn_rate, sample_period, noise_intensity), SENSOR, X0, P0)
 
 
 Z = simulate(_ct(0.05), KEY, T).measurements
@@ -53,6 +53,16 @@ def _filter_prior_ok(mean):
     return run_filter(ExtendedKalmanFilter(), model, Z, throw=False).ok
 
 
+@jax.jit
+def _range_ok(sample_period, noise_intensity, noise_std):
+    """Trajectory.ok and FilterResult.ok of a model whose ranged parameters are traced."""
+    sensor = RangeBearing(noise_std=noise_std, sensor_position=(-500.0, 300.0))
+    model = TrackingModel(CoordinatedTurn(0.05, sample_period, noise_intensity), sensor, X0, P0)
+    return simulate(model, KEY, T, throw=False).ok, run_filter(ExtendedKalmanFilter(), model, Z, throw=False).ok
+
+
+GOOD_STD = np.array([5.0, 0.01])
+
 _MEMBERS = [(ExtendedKalmanFilter(), _ct(0.0)),
             (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(1.0, 2.0), SENSOR, X0, P0))]
 
@@ -66,6 +76,45 @@ def test_good_values_are_ok_traced():
     """The twins do not flag good inputs (else the tests below could not fail)."""
     assert bool(_simulate_ok(0.05)) and bool(_filter_ok(0.05)) and bool(_filter_prior_ok(jnp.asarray(X0)))
     assert bool(_imm_ok(jnp.array([[0.9, 0.1], [0.2, 0.8]])))
+    assert all(map(bool, _range_ok(1.0, 0.1, GOOD_STD)))
+    assert all(map(bool, _range_ok(0.5, 0.0, GOOD_STD)))  # a zero noise intensity is allowed
+
+
+@SETTINGS
+@given(tau=st.one_of(st.just(0.0), st.floats(-10.0, -1e-6)))
+def test_sample_period_not_positive(tau):
+    """A period <= 0 is rejected concrete; traced it becomes NaN, so both results say ok=False."""
+    with pytest.raises(InputError, match="sample_period"):
+        CoordinatedTurn(0.05, tau, 0.1)
+    assert not any(map(bool, _range_ok(tau, 0.1, GOOD_STD)))
+
+
+@SETTINGS
+@given(q=st.floats(-5.0, -1e-6), which=st.sampled_from(["noise_intensity", "noise_std"]))
+def test_negative_noise_level(q, which):
+    std = GOOD_STD.copy()
+    if which == "noise_std":
+        std[0] = q
+        with pytest.raises(InputError, match="noise_std"):
+            RangeBearing(noise_std=std)
+        assert not any(map(bool, _range_ok(1.0, 0.1, std)))
+    else:
+        with pytest.raises(InputError, match="noise_intensity"):
+            CoordinatedTurn(0.05, 1.0, q)
+        assert not any(map(bool, _range_ok(1.0, q, GOOD_STD)))
+
+
+def test_the_twin_keeps_good_values_and_their_gradient():
+    """Bit for bit and the same derivative as without the twin (it only acts where the value is bad)."""
+    def period_sum(tau):
+        return jnp.sum(CoordinatedTurn(0.05, tau, 0.1).noise_cov(0))
+
+    tau = 0.7
+    np.testing.assert_array_equal(jax.jit(period_sum)(tau), period_sum(tau))
+    q1 = tau**3 / 3 + tau**2 / 2 + tau**2 / 2 + tau  # Q_1d summed, q = 0.1 on two axes
+    dq1 = tau**2 + 2 * tau + 1
+    np.testing.assert_allclose(jax.grad(period_sum)(tau), 2 * 0.1 * dq1, rtol=1e-14)
+    np.testing.assert_allclose(period_sum(tau), 2 * 0.1 * q1, rtol=1e-14)
 
 
 @SETTINGS

@@ -20,7 +20,7 @@ import numpy as np
 from jax.scipy.linalg import expm
 from jaxtyping import Array, ArrayLike, Float
 
-from .._validation import InputError, check_covariance, check_finite, check_shape, is_concrete
+from .._validation import InputError, check_covariance, check_finite, check_shape, is_concrete, nan_where_traced
 
 
 def check_taus(name: str, taus, *, allow_vector: bool = True) -> Array:
@@ -54,7 +54,7 @@ def check_taus(name: str, taus, *, allow_vector: bool = True) -> Array:
                 f"`{name}` must be strictly positive (sampling periods in seconds); "
                 f"{len(bad)} entries are not (first at index {first}: {np.atleast_1d(arr)[first]})."
             )
-    return taus
+    return nan_where_traced(taus, lambda t: t <= 0)
 
 
 def _check_dynamics(A, Qc, A_name: str, Qc_name: str) -> tuple[Array, Array]:

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._validation import InputError, check_finite, check_shape, is_concrete
+from .._validation import InputError, check_finite, check_shape, is_concrete, nan_where_traced
 from ._base import LinearGaussianModel
 from ._discretize import check_taus, discretize
 from ._layout import kinematic_layout
@@ -52,7 +52,7 @@ def _check_nonneg(name: str, x, shapes, *, strict: bool) -> Array:
                 f"`{name}` must be {what}; entry {first} is {arr[first]} "
                 f"(a standard deviation or spectral density, not a signed quantity)."
             )
-    return x
+    return nan_where_traced(x, (lambda a: a <= 0) if strict else (lambda a: a < 0))
 
 
 def _per_axis(name: str, x, dim: int, *, strict: bool) -> Array:

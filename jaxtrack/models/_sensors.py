@@ -54,7 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from .._validation import InputError, check_covariance, check_finite, check_shape, is_concrete
+from .._validation import InputError, check_covariance, check_finite, check_shape, is_concrete, nan_where_traced
 from ..geometry import rotation_x, rotation_y, rotation_z
 from ._base import _num_steps_of, at_step, wrap_angle
 from ._components import AbstractMeasurementModel
@@ -207,7 +207,7 @@ def _noise_arrays(noise_std, noise_cov, m: int, dtype):
         check_finite("noise_std", std)
         if is_concrete(std) and np.any(np.asarray(std) < 0):
             raise InputError(f"`noise_std` must be non-negative; got {np.asarray(std)}.")
-        return std, None
+        return nan_where_traced(std, lambda a: a < 0), None
     cov = jnp.asarray(noise_cov).astype(dtype)
     check_shape("noise_cov", cov, [(m, m), (None, m, m)])
     check_covariance("noise_cov", cov)

@@ -37,7 +37,8 @@ class Trajectory(NamedTuple):
 _SIMULATE_FAILED = (
     "jaxtrack.simulate produced a non-finite state or measurement. Likely cause: a model "
     "parameter built under jit/vmap/grad (a turn rate, sample period, noise level or sensor "
-    "position) is NaN or infinite, which the constructors check only on concrete values; or a "
+    "position) is NaN or infinite, or outside its range (a sample period <= 0, a negative noise "
+    "level: the constructors reject such concrete values and turn traced ones into NaN); or a "
     "transition that overflows. Pass throw=False to get the Trajectory with ok=False instead."
 )
 
