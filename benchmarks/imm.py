@@ -175,7 +175,7 @@ def filterpy_monte_carlo(num_runs, np_truth, seed=1):
 
 def jaxtrack_filter_job(imm):
     """Combined means ``(R, T, 4)`` and mode probabilities ``(R, T, 3)`` of a batch of runs."""
-    return jax.jit(jax.vmap(lambda z: (lambda r: (r.mean, r.mode_probs))(run_imm(imm, z, throw=False))))
+    return jax.jit(jax.vmap(lambda z: (lambda r: (r.filtered_mean, r.mode_probs))(run_imm(imm, z, throw=False))))
 
 
 def one_run(key, args):
@@ -183,8 +183,8 @@ def one_run(key, args):
     truth, imm = args
     traj = simulate(truth, key, truth.num_steps)
     res = run_imm(imm, traj.measurements, throw=False)
-    err = traj.states - res.mean
-    nees = jax.vmap(normalized_squared_error)(err, res.cov)
+    err = traj.states - res.filtered_mean
+    nees = jax.vmap(normalized_squared_error)(err, res.filtered_cov)
     return {"pos_sq": jnp.sum(err[:, :2] ** 2, axis=-1), "nees": nees, "mode_probs": res.mode_probs}
 
 

@@ -67,6 +67,8 @@ class Exportable:
     _export_kind: ClassVar[str] = ""
     _export_dims: ClassVar[dict[str, tuple[str, ...]]] = {}
     _export_units: ClassVar[dict[str, str]] = {}
+    # Old field name -> new, for files saved before a field was renamed (read under the new name).
+    _export_renamed: ClassVar[dict[str, str]] = {}
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -270,6 +272,9 @@ class Exportable:
         if unknown := sorted(set(meta) - known) + sorted((set(nested) | set(tuples)) - known):
             raise bad(f"unknown fields {unknown}")
         kwargs, used = {}, set()
+        for old_name, new_name in cls._export_renamed.items():  # a file saved before the rename
+            if f"{prefix}{old_name}" in entries and f"{prefix}{new_name}" not in entries:
+                entries[f"{prefix}{new_name}"] = entries.pop(f"{prefix}{old_name}")
         for f in array_fields:
             key = f"{prefix}{f.name}"
             if f.name in nested:

@@ -123,6 +123,27 @@ def test_imm_result_tuples_roundtrip_and_labels(imm_result, tmp_path):
     assert ds["mode_probs"].dims == ("time", "mode") and ds["mode_probs"].attrs["units"] == "probability"
 
 
+def test_imm_old_result_names_work_for_one_release(imm_result, tmp_path):
+    """`IMMResult.mean`/`.cov` were renamed `filtered_mean`/`filtered_cov` (one naming of results):
+    the old names still read, with a DeprecationWarning saying what to write, and a file saved
+    with the old names loads under the new ones."""
+    for old, new in (("mean", "filtered_mean"), ("cov", "filtered_cov")):
+        with pytest.warns(DeprecationWarning, match=rf"`IMMResult\.{old}` is deprecated: use `\.{new}`"):
+            value = getattr(imm_result, old)
+        np.testing.assert_array_equal(value, getattr(imm_result, new))
+    imm = InteractingMultipleModel([(ExtendedKalmanFilter(), TrackingModel(
+        ConstantVelocity(1.0, 0.05), RangeBearing(np.array([10.0, 0.004])), np.ones(4), np.eye(4)))], np.eye(1))
+    state, out = imm.step(imm.init(), jnp.array([100.0, 0.3]))
+    with pytest.warns(DeprecationWarning, match="IMMStepOutput.mean"):
+        np.testing.assert_array_equal(out.mean, out.filtered_mean)
+    # a file written before the rename: the same arrays under `mean` and `cov`
+    path = imm_result.save(tmp_path / "new.npz")
+    with np.load(path) as npz:
+        entries = {("mean" if k == "filtered_mean" else "cov" if k == "filtered_cov" else k): npz[k] for k in npz.files}
+    np.savez(tmp_path / "old.npz", **entries)
+    _assert_identical(imm_result, IMMResult.load(tmp_path / "old.npz"))
+
+
 def test_wrong_kind_is_refused_naming_path(cv, tmp_path):
     model, z, mask = cv
     path = run_filter(KalmanFilter(), model, z).save(tmp_path / "kf.npz")

@@ -114,8 +114,8 @@ def test_linear_members_match_filterpy(linear_data, first_step):
     mus = np.array(mus)
     assert mus[:, 1].min() < 0.15 and mus[:, 1].max() > 0.75  # modes actually switch
     np.testing.assert_allclose(res.mode_probs, mus, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(res.mean, np.array(means), rtol=1e-10, atol=1e-10)
-    np.testing.assert_allclose(res.cov, np.array(covs), rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(res.filtered_mean, np.array(means), rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(res.filtered_cov, np.array(covs), rtol=1e-10, atol=1e-10)
 
 
 def test_one_member_equals_its_filter(linear_data):
@@ -124,8 +124,8 @@ def test_one_member_equals_its_filter(linear_data):
     for first_step in ("update", "predict"):
         ref = run_filter(KalmanFilter(), model, zs, first_step=first_step)
         res = run_imm(InteractingMultipleModel([(KalmanFilter(), model)], [[1.0]]), zs, first_step=first_step)
-        np.testing.assert_allclose(res.mean, ref.filtered_mean, rtol=1e-14, atol=1e-12)
-        np.testing.assert_allclose(res.cov, ref.filtered_cov, rtol=1e-14, atol=1e-12)
+        np.testing.assert_allclose(res.filtered_mean, ref.filtered_mean, rtol=1e-14, atol=1e-12)
+        np.testing.assert_allclose(res.filtered_cov, ref.filtered_cov, rtol=1e-14, atol=1e-12)
         np.testing.assert_allclose(res.log_likelihood, ref.log_likelihood, rtol=1e-14)
         np.testing.assert_array_equal(res.mode_probs, 1.0)
 
@@ -268,8 +268,8 @@ def test_ekf_members_match_numpy_imm(rb_data):
     x, P, mu, ll = _np_imm(zs, motions, [4, 4], [X0, X0], [P0, P0], PTRANS, mu0)
     assert np.ptp(mu[:, 0]) > 0.5
     np.testing.assert_allclose(res.mode_probs, mu, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(res.mean, x, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(res.cov, P, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.filtered_mean, x, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.filtered_cov, P, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(res.log_likelihood, ll, rtol=1e-9)
 
 
@@ -288,10 +288,10 @@ def test_cv_plus_nearly_constant_turn_members(rb_data):
     res = run_imm(imm, zs, first_step="predict")
     motions = [lambda x: _np_cv(x, q), lambda x: _np_ct(None, x, q)]
     x, P, mu, ll = _np_imm(zs, motions, [4, 5], [X0, x05], [P0, p05], PTRANS, mu0)
-    assert res.mean.shape == (120, 5) and res.member_means[0].shape == (120, 4)
+    assert res.filtered_mean.shape == (120, 5) and res.member_means[0].shape == (120, 4)
     np.testing.assert_allclose(res.mode_probs, mu, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(res.mean, x, rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(res.cov, P, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.filtered_mean, x, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.filtered_cov, P, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(res.log_likelihood, ll, rtol=1e-9)
 
 
@@ -378,8 +378,8 @@ def test_square_root_members_equal_covariance_members(linear_data, rb_data):
     a = InteractingMultipleModel([(KalmanFilter(), m) for m in models], PTRANS)
     b = InteractingMultipleModel([(SquareRootKalmanFilter(), models[0]), (KalmanFilter(), models[1])], PTRANS)
     ra, rb = run_imm(a, linear_data), run_imm(b, linear_data)
-    np.testing.assert_allclose(rb.mean, ra.mean, rtol=0, atol=1e-9 * np.abs(ra.mean).max())
-    np.testing.assert_allclose(rb.cov, ra.cov, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(rb.filtered_mean, ra.filtered_mean, rtol=0, atol=1e-9 * np.abs(ra.filtered_mean).max())
+    np.testing.assert_allclose(rb.filtered_cov, ra.filtered_cov, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(rb.mode_probs, ra.mode_probs, rtol=0, atol=1e-9)
     np.testing.assert_allclose(rb.log_likelihood, ra.log_likelihood, rtol=1e-11)
     sa, sb = imm_smoother(a, linear_data), imm_smoother(b, linear_data)
@@ -391,7 +391,7 @@ def test_square_root_members_equal_covariance_members(linear_data, rb_data):
     u = InteractingMultipleModel([(UnscentedKalmanFilter(), m) for m in ct], PTRANS)
     v = InteractingMultipleModel([(SquareRootUnscentedKalmanFilter(), m) for m in ct], PTRANS)
     ru, rv = run_imm(u, rb_data), run_imm(v, rb_data)
-    np.testing.assert_allclose(rv.mean, ru.mean, rtol=0, atol=1e-8 * np.abs(ru.mean).max())
+    np.testing.assert_allclose(rv.filtered_mean, ru.filtered_mean, rtol=0, atol=1e-8 * np.abs(ru.filtered_mean).max())
     np.testing.assert_allclose(rv.mode_probs, ru.mode_probs, rtol=0, atol=1e-8)
 
 

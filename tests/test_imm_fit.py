@@ -81,7 +81,7 @@ def simulate(seed, num_tracks, num_steps):
 def position_rmse(params, truth, z):
     """Time-averaged position RMSE (m): mean over k of sqrt(mean over tracks of |e_k|²)."""
     imm = build(params)
-    est = np.asarray(jax.vmap(lambda zr: run_imm(imm, zr).mean)(jnp.asarray(z)))
+    est = np.asarray(jax.vmap(lambda zr: run_imm(imm, zr).filtered_mean)(jnp.asarray(z)))
     err2 = np.sum((est[..., :2] - truth[..., :2]) ** 2, axis=-1)
     return float(np.mean(np.sqrt(err2.mean(axis=0))))
 

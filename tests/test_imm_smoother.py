@@ -211,7 +211,7 @@ def test_monte_carlo_smoother_beats_filter(mc):
     assert bool(jnp.all(sm.ok))
     pos = traj.states[..., :2]
     rmse = lambda est: np.sqrt(np.mean(np.sum((np.asarray(est[..., :2]) - pos) ** 2, -1), -1))  # noqa: E731
-    r_f, r_s = rmse(sm.filtered.mean), rmse(sm.smoothed_mean)
+    r_f, r_s = rmse(sm.filtered.filtered_mean), rmse(sm.smoothed_mean)
     d = r_f - r_s
     se = d.std(ddof=1) / np.sqrt(N_RUNS)
     print(f"filter {r_f.mean():.3f} m, smoother {r_s.mean():.3f} m, diff {d.mean():.3f} ± {se:.4f} m")
@@ -223,7 +223,7 @@ def test_monte_carlo_smoother_beats_filter(mc):
         e = np.asarray(traj.states - mean)
         return np.mean(np.einsum("rki,rkij,rkj->rk", e, np.linalg.inv(np.asarray(cov)), e))
 
-    a_f, a_s = anees(sm.filtered.mean, sm.filtered.cov), anees(sm.smoothed_mean, sm.smoothed_cov)
+    a_f, a_s = anees(sm.filtered.filtered_mean, sm.filtered.filtered_cov), anees(sm.smoothed_mean, sm.smoothed_cov)
     print(f"ANEES filter {a_f:.2f}, smoother {a_s:.2f}")
     assert 3.5 < a_f < 4.5 and 1.5 < a_s < 4.5
 

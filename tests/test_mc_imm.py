@@ -62,9 +62,9 @@ def test_imm_monte_carlo_equals_replayed_runs():
     for i in range(RUNS):
         tr = simulate(truth, jax.random.fold_in(key, i), T)
         out = run_imm(imm, tr.measurements)
-        e = np.asarray(tr.states) - np.asarray(out.mean)[:, :4]
+        e = np.asarray(tr.states) - np.asarray(out.filtered_mean)[:, :4]
         sq += e**2
-        nees += [_nees(e[k], np.asarray(out.cov)[k, :4, :4]) for k in range(T)]
+        nees += [_nees(e[k], np.asarray(out.filtered_cov)[k, :4, :4]) for k in range(T)]
         mu += np.asarray(out.mode_probs)
     np.testing.assert_allclose(res.mse, sq / RUNS, rtol=1e-9)
     np.testing.assert_allclose(res.nees, nees / RUNS, rtol=1e-9)

@@ -192,15 +192,15 @@ def test_imm_embeds_a_2d_member_in_a_3d_state_by_name(cv2_cv3_runs):
     assert imm_p.member_indices == ((0, 1, 2, 3), (0, 1, 2, 3, 4, 5))
     assert bool(res.ok) and bool(sm.ok)
     p = [imm_p.state_layout.index(c) for c in CV3]  # prefix order → native order
-    np.testing.assert_allclose(res.mean, res_p.mean[:, p], rtol=0, atol=1e-9)
-    np.testing.assert_allclose(res.cov, res_p.cov[:, p][:, :, p], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(res.filtered_mean, res_p.filtered_mean[:, p], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.filtered_cov, res_p.filtered_cov[:, p][:, :, p], rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(res.mode_probs, res_p.mode_probs, rtol=0, atol=1e-12)
     np.testing.assert_allclose(res.member_means[0], res_p.member_means[0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(sm.smoothed_mean, sm_p.smoothed_mean[:, p], rtol=0, atol=1e-9)
     np.testing.assert_allclose(sm.smoothed_cov, sm_p.smoothed_cov[:, p][:, :, p], rtol=1e-9, atol=1e-9)
     # the combined height mixes the 3-D member's z with the augment value 0 only: it never sees vx
     z3 = np.asarray(res.member_means[1][:, 2])
-    np.testing.assert_allclose(res.mean[:, 2], res.mode_probs[:, 1] * z3, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(res.filtered_mean[:, 2], res.mode_probs[:, 1] * z3, rtol=0, atol=1e-9)
 
 
 def test_declared_state_indices_match_the_derived_embedding():

@@ -56,6 +56,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from .._deprecation import renamed
 from .._export import Exportable
 from .._validation import InputError, check_finite, check_shape, is_concrete
 from ..models import AbstractStateSpaceModel
@@ -206,16 +207,20 @@ class IMMState(eqx.Module):
 class IMMStepOutput(eqx.Module):
     """One IMM step's outputs besides the new state.
 
-    ``mean`` ``(N,)``, ``cov`` ``(N, N)``: the combined estimate (eqs. 11.6.6-14, -15);
-    ``mode_probs`` ``(M,)``; ``member_log_likelihoods`` ``(M,)``: ``log Λ_j``; ``log_likelihood``
-    ``()``: this step's ``log Σ_j Λ_j c̄_j``.
+    ``filtered_mean`` ``(N,)``, ``filtered_cov`` ``(N, N)``: the combined estimate (eqs.
+    11.6.6-14, -15); ``mode_probs`` ``(M,)``; ``member_log_likelihoods`` ``(M,)``: ``log Λ_j``;
+    ``log_likelihood`` ``()``: this step's ``log Σ_j Λ_j c̄_j``. (``mean`` and ``cov``: deprecated
+    aliases of the first two.)
     """
 
-    mean: Float[Array, " N"]
-    cov: Float[Array, "N N"]
+    filtered_mean: Float[Array, " N"]
+    filtered_cov: Float[Array, "N N"]
     mode_probs: Float[Array, " M"]
     member_log_likelihoods: Float[Array, " M"]
     log_likelihood: Float[Array, ""]
+
+    mean = renamed("mean", "filtered_mean")
+    cov = renamed("cov", "filtered_cov")
 
 
 class InteractingMultipleModel(eqx.Module):
@@ -450,18 +455,20 @@ class InteractingMultipleModel(eqx.Module):
 class IMMResult(Exportable, eqx.Module):
     """Output of :func:`run_imm` for one trajectory of ``T`` steps.
 
-    **Fields:** ``mean`` ``(T, N)``, ``cov`` ``(T, N, N)``: the combined ``x̂_{k/k}``, ``P_{k/k}``;
-    ``mode_probs`` ``(T, M)``; ``member_means``, ``member_covs``: tuples of ``(T, n_j)`` and
-    ``(T, n_j, n_j)``; ``member_log_likelihoods`` ``(T, M)``: ``log Λ_j`` per step;
-    ``log_likelihood`` ``()``: ``Σ_k log Σ_j Λ_j c̄_j``; ``ok`` ``()`` bool.
+    **Fields:** ``filtered_mean`` ``(T, N)``, ``filtered_cov`` ``(T, N, N)``: the combined
+    ``x̂_{k/k}``, ``P_{k/k}`` (named as in :class:`~jaxtrack.filters.FilterResult`; ``mean`` and
+    ``cov`` are deprecated aliases); ``mode_probs`` ``(T, M)``; ``member_means``,
+    ``member_covs``: tuples of ``(T, n_j)`` and ``(T, n_j, n_j)`` (each member's filtered
+    moments); ``member_log_likelihoods`` ``(T, M)``: ``log Λ_j`` per step; ``log_likelihood``
+    ``()``: ``Σ_k log Σ_j Λ_j c̄_j``; ``ok`` ``()`` bool.
 
     **Export** (:mod:`jaxtrack._export`): ``to_dict()``, ``save(path)`` / ``IMMResult.load(path)``
     (one ``.npz``, bit for bit), ``to_xarray()`` and ``to_pandas()`` (one row per step) with the
     optional ``export`` extra.
     """
 
-    mean: Float[Array, "T N"]
-    cov: Float[Array, "T N N"]
+    filtered_mean: Float[Array, "T N"]
+    filtered_cov: Float[Array, "T N N"]
     mode_probs: Float[Array, "T M"]
     member_means: tuple
     member_covs: tuple
@@ -469,12 +476,17 @@ class IMMResult(Exportable, eqx.Module):
     log_likelihood: Float[Array, ""]
     ok: Bool[Array, ""]
 
+    mean = renamed("mean", "filtered_mean")
+    cov = renamed("cov", "filtered_cov")
+
     _export_kind = "jaxtrack.IMMResult"
-    _export_dims = {"mean": ("time", "state"), "cov": ("time", "state", "state_col"), "mode_probs": ("time", "mode"),
+    _export_renamed = {"mean": "filtered_mean", "cov": "filtered_cov"}
+    _export_dims = {"filtered_mean": ("time", "state"), "filtered_cov": ("time", "state", "state_col"),
+                    "mode_probs": ("time", "mode"),
                     "member_means": ("time", "state"), "member_covs": ("time", "state", "state_col"),
                     "member_log_likelihoods": ("time", "mode"), "log_likelihood": (), "ok": ()}
-    _export_units = {"mean": "state units", "cov": "state units squared", "mode_probs": "probability",
-                     "member_means": "state units", "member_covs": "state units squared",
+    _export_units = {"filtered_mean": "state units", "filtered_cov": "state units squared",
+                     "mode_probs": "probability", "member_means": "state units", "member_covs": "state units squared",
                      "member_log_likelihoods": "nats", "log_likelihood": "nats"}
 
 
@@ -487,7 +499,7 @@ def _run_imm_jit(imm, z, observed, first_step, throw):
 
     final, (out, means, covs) = jax.lax.scan(body, imm.init(), (z, observed))
     result = IMMResult(
-        out.mean, out.cov, out.mode_probs, means, covs, out.member_log_likelihoods,
+        out.filtered_mean, out.filtered_cov, out.mode_probs, means, covs, out.member_log_likelihoods,
         final.log_likelihood, final.ok,
     )
     if throw:

@@ -172,7 +172,7 @@ def _backward_step(
 
 @eqx.filter_jit
 def _imm_backward(imm: InteractingMultipleModel, filtered: IMMResult, throw: bool) -> IMMSmootherResult:
-    T = filtered.mean.shape[0]
+    T = filtered.filtered_mean.shape[0]
 
     def body(carry, inputs):
         next_means, next_covs, mu_next = carry
@@ -194,8 +194,8 @@ def _imm_backward(imm: InteractingMultipleModel, filtered: IMMResult, throw: boo
     _, (means, covs, mu_s, mean, cov) = jax.lax.scan(body, last, inputs, reverse=True)
     cat = lambda a, b: jnp.concatenate([a, b[None]])  # noqa: E731
     result = IMMSmootherResult(
-        cat(mean, filtered.mean[-1]),
-        cat(cov, filtered.cov[-1]),
+        cat(mean, filtered.filtered_mean[-1]),
+        cat(cov, filtered.filtered_cov[-1]),
         cat(mu_s, filtered.mode_probs[-1]),
         tuple(cat(a, b) for a, b in zip(means, last[0])),
         tuple(cat(a, b) for a, b in zip(covs, last[1])),
@@ -252,9 +252,9 @@ def imm_smoother(
     filtered = run_imm(
         imm, measurements, mask=mask, first_step=first_step, nan_as_missing=nan_as_missing, throw=throw
     )
-    if filtered.mean.shape[0] == 1:
+    if filtered.filtered_mean.shape[0] == 1:
         res = IMMSmootherResult(
-            filtered.mean, filtered.cov, filtered.mode_probs, filtered.member_means, filtered.member_covs,
+            filtered.filtered_mean, filtered.filtered_cov, filtered.mode_probs, filtered.member_means, filtered.member_covs,
             filtered, filtered.ok,
         )
         return _with_status(res, throw)

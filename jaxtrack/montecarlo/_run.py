@@ -144,8 +144,8 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, c
         if imm:
             # An IMM has no single innovation: NIS is not scored (0, with 0 degrees of freedom).
             filt, out = filter.step(filt, z, obs, first_step=first_step)
-            error = _scored(x, out.mean, components)
-            nees = normalized_squared_error(error, marginal_cov(out.cov, fc))
+            error = _scored(x, out.filtered_mean, components)
+            nees = normalized_squared_error(error, marginal_cov(out.filtered_cov, fc))
             return filt, error, nees, jnp.zeros((), error.dtype), out.mode_probs
         filt, (_, _, post) = filter.step(filter_model, filt, z, obs, first_step=first_step)
         error = _scored(x, post.mean, components)

@@ -93,8 +93,8 @@ def _one_run(key, args):
     b = run_filter(ekf, ct, z, save="mean", throw=False)
     smooth = imm_smoother(imm, z, throw=False)
     c = run_imm(learned, z, throw=False)
-    errors = jnp.stack([sq(a.filtered_mean), sq(b.filtered_mean), sq(smooth.filtered.mean),
-                        sq(smooth.smoothed_mean), sq(c.mean)])
+    errors = jnp.stack([sq(a.filtered_mean), sq(b.filtered_mean), sq(smooth.filtered.filtered_mean),
+                        sq(smooth.smoothed_mean), sq(c.filtered_mean)])
     ok = a.ok & b.ok & smooth.ok & c.ok
     return errors, smooth.smoothed_mode_probs, ok
 
