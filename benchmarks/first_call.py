@@ -92,9 +92,10 @@ def _imm_example():
     radar = m.RangeBearing(jnp.array([20.0, 2e-3]))
     x0, P0 = jnp.array([-12e3, 4e3, 150.0, 0.0]), jnp.diag(jnp.array([100.0, 100, 20, 20]) ** 2)
     omega = jnp.where((jnp.arange(200) // 40) % 2 == 1, 0.06, 0.0)
-    truth = m.TrackingModel(m.CoordinatedTurn(omega, 1.0, 0.1), radar, x0, P0)
-    cv = m.TrackingModel(m.ConstantVelocity(1.0, 1.0), radar, x0, P0)
-    ct = m.TrackingModel(m.NearlyConstantTurn(1.0, 0.1, 1e-4), radar, jnp.append(x0, 0.0),
+    truth = m.TrackingModel(m.CoordinatedTurn(1.0, turn_rate=omega, noise_intensity=0.1), radar, x0, P0)
+    cv = m.TrackingModel(m.ConstantVelocity(1.0, noise_intensity=1.0), radar, x0, P0)
+    ct = m.TrackingModel(m.NearlyConstantTurn(1.0, noise_intensity=0.1, turn_rate_intensity=1e-4), radar,
+                         jnp.append(x0, 0.0),
                          jnp.diag(jnp.append(jnp.diag(P0), 0.05**2)))
     return truth, [(ekf(), cv), (ekf(), ct)], jnp.array([[0.95, 0.05], [0.05, 0.95]])
 

@@ -84,8 +84,9 @@ def turn_schedule(num_steps: int) -> np.ndarray:
 def member_models():
     """CV, CT(+ω), CT(−ω) as ``LinearGaussianModel`` (F from the library's motion models)."""
     out = []
-    for motion in (ConstantVelocity(TAU, Q_ACCEL), CoordinatedTurn(OMEGA, TAU, Q_ACCEL),
-                   CoordinatedTurn(-OMEGA, TAU, Q_ACCEL)):
+    for motion in (ConstantVelocity(TAU, noise_intensity=Q_ACCEL), CoordinatedTurn(TAU, turn_rate=OMEGA,
+        noise_intensity=Q_ACCEL),
+                   CoordinatedTurn(TAU, turn_rate=-OMEGA, noise_intensity=Q_ACCEL)):
         out.append(LinearGaussianModel(motion.transition_matrix(0), motion.noise_cov(0), H, R, X0, P0))
     return out
 
@@ -96,7 +97,8 @@ def make_imm():
 
 def truth_model(num_steps: int) -> LinearGaussianModel:
     """The maneuvering truth: per-step ``F_k`` of ``CoordinatedTurn(turn_schedule)``."""
-    ct = CoordinatedTurn(jnp.asarray(turn_schedule(num_steps)), jnp.full(num_steps, TAU), Q_ACCEL)
+    ct = CoordinatedTurn(jnp.full(num_steps, TAU), turn_rate=jnp.asarray(turn_schedule(num_steps)),
+                         noise_intensity=Q_ACCEL)
     F = jax.vmap(ct.transition_matrix)(jnp.arange(num_steps))
     return LinearGaussianModel(F, ct.noise_cov(0), H, R, X0, P0)
 
@@ -148,7 +150,7 @@ def numpy_truth(num_steps):
     """The truth's ``F_k`` ``(T, 4, 4)`` and the Cholesky factors of ``Q`` and ``P0`` as numpy
     arrays (built once, outside the timed FilterPy job)."""
     Fs = np.asarray(truth_model(num_steps).F)
-    Q = np.asarray(ConstantVelocity(TAU, Q_ACCEL).noise_cov(0))
+    Q = np.asarray(ConstantVelocity(TAU, noise_intensity=Q_ACCEL).noise_cov(0))
     return Fs, np.linalg.cholesky(Q), np.linalg.cholesky(P0)
 
 

@@ -53,7 +53,7 @@ def main():
     T = args.steps
     P0 = np.diag([100.0, 100.0, 4.0, 4.0])
     m0 = np.array([100.0, 200.0, 5.0, -3.0])
-    model = TrackingModel(ConstantVelocity(1.0, 0.5, dim=2),
+    model = TrackingModel(ConstantVelocity(1.0, noise_intensity=0.5, dim=2),
                           RangeBearing(noise_std=(5.0, 0.01), sensor_position=(-500.0, 300.0)), m0, P0)
     key = jax.random.key(0)
     run = simulate(model, key, T)

@@ -232,7 +232,7 @@ def scenario_a() -> Scenario:
     R = np.diag([5.0**2, 0.01**2])
     m0 = np.array([0.0, -500.0, 15.0, 0.0])  # circle of radius 500 m about the origin
     P0 = np.diag([30.0**2, 30.0**2, 2.0**2, 2.0**2])
-    transition = CoordinatedTurn(omega, TAU, jnp.asarray(q))
+    transition = CoordinatedTurn(TAU, turn_rate=omega, noise_intensity=jnp.asarray(q))
     sensor_kwargs = dict(noise_std=np.sqrt(np.diag(R)), sensor_position=sensor, sensor_yaw=yaw)
     model = TrackingModel(transition, RangeBearing(**sensor_kwargs), m0, P0)
     model_ss = in_stonesoup_order(transition, RangeBearing, sensor_kwargs, m0, P0)
@@ -262,7 +262,7 @@ def scenario_b() -> Scenario:
     R = np.diag([10.0**2, 2e-3**2, 2e-3**2])
     m0 = np.array([1500.0, -800.0, 900.0, -10.0, 12.0, 0.5])
     P0 = np.diag([40.0**2] * 3 + [2.0**2] * 3)
-    transition = CoordinatedTurn(omega, TAU, jnp.asarray(q), dim=3)
+    transition = CoordinatedTurn(TAU, turn_rate=omega, noise_intensity=jnp.asarray(q), dim=3)
     sensor_kwargs = dict(
         noise_std=np.sqrt(np.diag(R)),
         sensor_position=sensors,
@@ -298,7 +298,7 @@ def scenario_c() -> Scenario:
     m0 = np.array([0.0, -600.0, 18.0, 0.0, 0.03])
     P0 = np.diag([30.0**2, 30.0**2, 2.0**2, 2.0**2, 0.01**2])
     model = TrackingModel(
-        NearlyConstantTurn(TAU, jnp.asarray(q), q_omega),
+        NearlyConstantTurn(TAU, noise_intensity=jnp.asarray(q), turn_rate_intensity=q_omega),
         RangeBearing(np.sqrt(np.diag(R)), sensor_position=sensor),
         m0,
         P0,

@@ -102,7 +102,8 @@ def test_smoother_on_singular_predicted_covariance_is_finite_and_ok():
 
 
 def _turn_model(turn_rate, noise_std=(1.0, 0.01)):
-    return TrackingModel(CoordinatedTurn(turn_rate, 1.0, 0.1), RangeBearing(noise_std=noise_std),
+    return TrackingModel(CoordinatedTurn(1.0, turn_rate=turn_rate, noise_intensity=0.1),
+                         RangeBearing(noise_std=noise_std),
                          np.array([100.0, 50.0, 1.0, 0.0]), np.eye(4))
 
 

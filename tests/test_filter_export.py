@@ -101,11 +101,12 @@ def imm_result():
     tau = 1.0
     x0, p0 = np.array([2000.0, 1000.0, -15.0, 10.0]), np.diag([400.0, 400.0, 25.0, 25.0])
     sensor = RangeBearing(np.array([10.0, 0.004]))
-    truth = TrackingModel(ConstantVelocity(tau, 0.05), sensor, x0, p0)
+    truth = TrackingModel(ConstantVelocity(tau, noise_intensity=0.05), sensor, x0, p0)
     x5, p5 = np.append(x0, 0.0), np.diag(np.append(np.diag(p0), 0.01))
     members = [
         (ExtendedKalmanFilter(), truth),
-        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(tau, 0.05, 1e-4), sensor, x5, p5)),
+        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(tau, noise_intensity=0.05,
+                                                                  turn_rate_intensity=1e-4), sensor, x5, p5)),
     ]
     imm = InteractingMultipleModel(members, np.array([[0.9, 0.1], [0.1, 0.9]]))
     z = simulate(truth, jax.random.key(1), T).measurements
@@ -131,8 +132,9 @@ def test_imm_old_result_names_work_for_one_release(imm_result, tmp_path):
         with pytest.warns(DeprecationWarning, match=rf"`IMMResult\.{old}` is deprecated: use `\.{new}`"):
             value = getattr(imm_result, old)
         np.testing.assert_array_equal(value, getattr(imm_result, new))
-    imm = InteractingMultipleModel([(ExtendedKalmanFilter(), TrackingModel(
-        ConstantVelocity(1.0, 0.05), RangeBearing(np.array([10.0, 0.004])), np.ones(4), np.eye(4)))], np.eye(1))
+    one = TrackingModel(ConstantVelocity(1.0, noise_intensity=0.05), RangeBearing(np.array([10.0, 0.004])),
+                        np.ones(4), np.eye(4))
+    imm = InteractingMultipleModel([(ExtendedKalmanFilter(), one)], np.eye(1))
     state, out = imm.step(imm.init(), jnp.array([100.0, 0.3]))
     with pytest.warns(DeprecationWarning, match="IMMStepOutput.mean"):
         np.testing.assert_array_equal(out.mean, out.filtered_mean)

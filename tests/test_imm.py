@@ -42,14 +42,14 @@ def _maneuvering_truth(T, rng):
     out = []
     for k in range(T):
         omega = 0.08 if 60 <= k < 100 or 150 <= k < 170 else 0.0
-        F = np.asarray(CoordinatedTurn(omega, TAU, 0.0).transition_matrix(0))
+        F = np.asarray(CoordinatedTurn(TAU, turn_rate=omega, noise_intensity=0.0).transition_matrix(0))
         x = F @ x + rng.normal(0, 0.05, 4) * np.array([0.5, 0.5, 1, 1])
         out.append(x)
     return np.array(out)
 
 
 def _cv_model(q, x0=X0, p0=P0):
-    cv = ConstantVelocity(TAU, q)
+    cv = ConstantVelocity(TAU, noise_intensity=q)
     F, Q = np.asarray(cv.transition_matrix(0)), np.asarray(cv.noise_cov(0))
     return LinearGaussianModel(F, Q, H2, R2, x0, p0)
 
@@ -260,7 +260,7 @@ def test_ekf_members_match_numpy_imm(rb_data):
     zs = rb_data
     sensor = RangeBearing(RB_STD, sensor_position=SENSOR)
     omegas, q = (0.08, -0.08), 0.05
-    models = [TrackingModel(CoordinatedTurn(w, TAU, q), sensor, X0, P0) for w in omegas]
+    models = [TrackingModel(CoordinatedTurn(TAU, turn_rate=w, noise_intensity=q), sensor, X0, P0) for w in omegas]
     mu0 = np.array([0.5, 0.5])
     imm = InteractingMultipleModel([(ExtendedKalmanFilter(), m) for m in models], PTRANS, mu0)
     res = run_imm(imm, zs, first_step="predict")
@@ -280,8 +280,8 @@ def test_cv_plus_nearly_constant_turn_members(rb_data):
     q = 0.05
     x05, p05 = np.append(X0, 0.05), np.diag(np.append(np.diag(P0), 0.01))
     models = [
-        TrackingModel(ConstantVelocity(TAU, q), sensor, X0, P0),
-        TrackingModel(NearlyConstantTurn(TAU, q, 1e-4), sensor, x05, p05),
+        TrackingModel(ConstantVelocity(TAU, noise_intensity=q), sensor, X0, P0),
+        TrackingModel(NearlyConstantTurn(TAU, noise_intensity=q, turn_rate_intensity=1e-4), sensor, x05, p05),
     ]
     mu0 = np.array([0.6, 0.4])
     imm = InteractingMultipleModel([(ExtendedKalmanFilter(), m) for m in models], PTRANS, mu0)
@@ -302,7 +302,7 @@ def test_gradients_match_central_differences(linear_data):
 
     def loglik(logits, log_q):
         # The constructor checks concrete arrays; a traced Q goes in with tree_at.
-        Q = ConstantVelocity(TAU, jnp.exp(log_q)).noise_cov(0)
+        Q = ConstantVelocity(TAU, noise_intensity=jnp.exp(log_q)).noise_cov(0)
         m1 = eqx.tree_at(lambda m: m.Q, base, Q)
         imm = InteractingMultipleModel.from_logits([(KalmanFilter(), m1), (KalmanFilter(), m2)], logits)
         return run_imm(imm, zs, throw=False).log_likelihood
@@ -387,7 +387,7 @@ def test_square_root_members_equal_covariance_members(linear_data, rb_data):
     np.testing.assert_allclose(sb.smoothed_mode_probs, sa.smoothed_mode_probs, rtol=0, atol=1e-9)
 
     sensor = RangeBearing(RB_STD, sensor_position=SENSOR)
-    ct = [TrackingModel(CoordinatedTurn(w, TAU, 0.05), sensor, X0, P0) for w in (0.08, -0.08)]
+    ct = [TrackingModel(CoordinatedTurn(TAU, turn_rate=w, noise_intensity=0.05), sensor, X0, P0) for w in (0.08, -0.08)]
     u = InteractingMultipleModel([(UnscentedKalmanFilter(), m) for m in ct], PTRANS)
     v = InteractingMultipleModel([(SquareRootUnscentedKalmanFilter(), m) for m in ct], PTRANS)
     ru, rv = run_imm(u, rb_data), run_imm(v, rb_data)

@@ -48,7 +48,8 @@ OPTIMIZER = optax.adam(0.05)
 def build(p):
     q = jnp.exp(p["log_q"])
     w = jnp.exp(p["log_omega"])
-    motions = [ConstantVelocity(TAU, q[0]), CoordinatedTurn(w, TAU, q[1]), CoordinatedTurn(-w, TAU, q[1])]
+    motions = [ConstantVelocity(TAU, noise_intensity=q[0]), CoordinatedTurn(TAU, turn_rate=w, noise_intensity=q[1]),
+               CoordinatedTurn(TAU, turn_rate=-w, noise_intensity=q[1])]
     kf = KalmanFilter()
     members = [
         (kf, LinearGaussianModel(t.transition_matrix(0), t.noise_cov(0), H, R_MEAS, M0, P0)) for t in motions
@@ -59,8 +60,9 @@ def build(p):
 def simulate(seed, num_tracks, num_steps):
     """Truth ``(R, T, 4)`` and measurements ``(R, T, 2)`` from the true jump-Markov model."""
     rng = np.random.default_rng(seed)
-    motions = [ConstantVelocity(TAU, Q_TRUE[0]), CoordinatedTurn(OMEGA, TAU, Q_TRUE[1]),
-               CoordinatedTurn(-OMEGA, TAU, Q_TRUE[1])]
+    motions = [ConstantVelocity(TAU, noise_intensity=Q_TRUE[0]), CoordinatedTurn(TAU, turn_rate=OMEGA,
+        noise_intensity=Q_TRUE[1]),
+               CoordinatedTurn(TAU, turn_rate=-OMEGA, noise_intensity=Q_TRUE[1])]
     F = np.stack([np.asarray(t.transition_matrix(0)) for t in motions])
     L = np.stack([np.linalg.cholesky(np.asarray(t.noise_cov(0))) for t in motions])
     x = M0 + rng.standard_normal((num_tracks, 4)) @ np.linalg.cholesky(P0).T

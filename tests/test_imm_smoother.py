@@ -39,16 +39,16 @@ Q_INT = 0.05  # m²/s³
 
 
 def _linear(F, q=Q_INT, x0=X0, p0=P0):
-    Q = np.asarray(ConstantVelocity(TAU, q).noise_cov(0))
+    Q = np.asarray(ConstantVelocity(TAU, noise_intensity=q).noise_cov(0))
     return LinearGaussianModel(F, Q, H2, R2, x0, p0)
 
 
 def _cv_F():
-    return np.asarray(ConstantVelocity(TAU, 0.0).transition_matrix(0))
+    return np.asarray(ConstantVelocity(TAU, noise_intensity=0.0).transition_matrix(0))
 
 
 def _ct_F(w=OMEGA):
-    return np.asarray(CoordinatedTurn(w, TAU, 0.0).transition_matrix(0))
+    return np.asarray(CoordinatedTurn(TAU, turn_rate=w, noise_intensity=0.0).transition_matrix(0))
 
 
 def _assert_equal_to_rts(sm, rts, tol=1e-10):
@@ -78,7 +78,7 @@ def test_one_ekf_member_equals_extended_rts():
     sensor = RangeBearing(np.array([5.0, 0.01]), sensor_position=np.array([-200.0, 300.0]))
     x0 = np.array([0.0, 0.0, 10.0, 0.0, 0.05])
     p0 = np.diag([100.0, 100.0, 4.0, 4.0, 1e-3])
-    model = TrackingModel(NearlyConstantTurn(TAU, 0.05, 1e-4), sensor, x0, p0)
+    model = TrackingModel(NearlyConstantTurn(TAU, noise_intensity=0.05, turn_rate_intensity=1e-4), sensor, x0, p0)
     zs = simulate(model, jax.random.PRNGKey(2), 60).measurements
     imm = InteractingMultipleModel([(ExtendedKalmanFilter(), model)], np.ones((1, 1)))
     sm = imm_smoother(imm, zs)
@@ -156,7 +156,7 @@ def test_two_distinct_members_match_numpy_kim():
     imm = _members_imm()
     sm = imm_smoother(imm, zs)
     f = sm.filtered
-    Q = np.asarray(ConstantVelocity(TAU, Q_INT).noise_cov(0))
+    Q = np.asarray(ConstantVelocity(TAU, noise_intensity=Q_INT).noise_cov(0))
     x, P, mu, x0, P0_ = _numpy_kim(
         [_cv_F(), _ct_F()], [Q, Q], np.asarray(imm.transition_probs), np.asarray(f.mode_probs),
         np.stack([np.asarray(m) for m in f.member_means]), np.stack([np.asarray(c) for c in f.member_covs]),
@@ -247,13 +247,15 @@ def test_monte_carlo_mode_probabilities(mc):
 def test_mixed_dimensions_and_errors():
     """CV (4) + NCT (5) EKF members: shapes, finiteness, μ rows sum to 1; wrong `imm` raises."""
     sensor = RangeBearing(np.array([5.0, 0.01]), sensor_position=np.array([-200.0, 300.0]))
-    truth = TrackingModel(NearlyConstantTurn(TAU, 0.05, 1e-4), sensor, np.append(X0, 0.05),
+    truth = TrackingModel(NearlyConstantTurn(TAU, noise_intensity=0.05, turn_rate_intensity=1e-4), sensor,
+                          np.append(X0, 0.05),
                           np.diag([100.0, 100.0, 4.0, 4.0, 1e-3]))
     zs = simulate(truth, jax.random.PRNGKey(5), 25).measurements
     x05, p05 = np.append(X0, 0.0), np.diag(np.append(np.diag(P0), 0.01))
     members = [
-        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(TAU, 0.05), sensor, X0, P0)),
-        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(TAU, 0.05, 1e-4), sensor, x05, p05)),
+        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(TAU, noise_intensity=0.05), sensor, X0, P0)),
+        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(TAU, noise_intensity=0.05,
+                                                                  turn_rate_intensity=1e-4), sensor, x05, p05)),
     ]
     imm = InteractingMultipleModel(members, np.array([[0.9, 0.1], [0.2, 0.8]]), np.array([0.5, 0.5]))
     sm = imm_smoother(imm, zs)

@@ -37,14 +37,15 @@ OMEGA = np.where((np.arange(T) >= 12) & (np.arange(T) < 28), 0.06, 0.0)
 
 
 def _truth():
-    return TrackingModel(CoordinatedTurn(OMEGA, TAU, 0.05), SENSOR, X0, P0)
+    return TrackingModel(CoordinatedTurn(TAU, turn_rate=OMEGA, noise_intensity=0.05), SENSOR, X0, P0)
 
 
 def _imm():
     x5, p5 = np.append(X0, 0.0), np.diag(np.append(np.diag(P0), 0.01))
     members = [
-        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(TAU, 0.05), SENSOR, X0, P0)),
-        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(TAU, 0.05, 1e-4), SENSOR, x5, p5)),
+        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(TAU, noise_intensity=0.05), SENSOR, X0, P0)),
+        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(TAU, noise_intensity=0.05,
+                                                                  turn_rate_intensity=1e-4), SENSOR, x5, p5)),
     ]
     return InteractingMultipleModel(members, np.array([[0.9, 0.1], [0.1, 0.9]]))
 
@@ -81,11 +82,11 @@ def test_single_filter_has_no_mode_probs_and_cv_filter_scores_on_subset():
     """A 4-state CV EKF on the turning truth (same size: no components needed) has
     mode_probs None; a 5-state NCT EKF scored on its first 4 components equals its replay."""
     truth, key = _truth(), jax.random.key(4)
-    cv = TrackingModel(ConstantVelocity(TAU, 0.05), SENSOR, X0, P0)
+    cv = TrackingModel(ConstantVelocity(TAU, noise_intensity=0.05), SENSOR, X0, P0)
     res_cv = monte_carlo(truth, key, RUNS, filter=ExtendedKalmanFilter(), filter_model=cv, progress=False)
     assert res_cv.mode_probs is None and res_cv.components is None
     x5, p5 = np.append(X0, 0.0), np.diag(np.append(np.diag(P0), 0.01))
-    nct = TrackingModel(NearlyConstantTurn(TAU, 0.05, 1e-4), SENSOR, x5, p5)
+    nct = TrackingModel(NearlyConstantTurn(TAU, noise_intensity=0.05, turn_rate_intensity=1e-4), SENSOR, x5, p5)
     res = monte_carlo(truth, key, RUNS, filter=ExtendedKalmanFilter(), filter_model=nct,
                       filter_components=(0, 1, 2, 3), num_steps=T, progress=False)
     sq, nees = np.zeros((T, 4)), np.zeros(T)
@@ -102,7 +103,7 @@ def test_single_filter_has_no_mode_probs_and_cv_filter_scores_on_subset():
 
 
 def _linear(n_extra=0):
-    cv = ConstantVelocity(TAU, 0.5)
+    cv = ConstantVelocity(TAU, noise_intensity=0.5)
     F, Q = np.asarray(cv.transition_matrix(0)), np.asarray(cv.noise_cov(0))
     H = np.hstack([np.eye(2), np.zeros((2, 2))])
     return LinearGaussianModel(F, Q, H, np.diag([25.0, 16.0]), X0, P0)
@@ -136,7 +137,7 @@ def test_components_on_linear_paths_and_square_root(covariance):
 def test_input_errors_name_the_argument():
     truth, imm = _truth(), _imm()
     key = jax.random.key(0)
-    cv = TrackingModel(ConstantVelocity(TAU, 0.05), SENSOR, X0, P0)
+    cv = TrackingModel(ConstantVelocity(TAU, noise_intensity=0.05), SENSOR, X0, P0)
     with pytest.raises(InputError, match="filter_model"):
         monte_carlo(truth, key, 4, filter=imm, filter_model=cv, progress=False)
     with pytest.raises(InputError, match="covariance='shared'"):

@@ -58,7 +58,7 @@ def _permute(M, p):
 def test_coordinated_turn_matches_stonesoup_known_turn_rate(omega, tau):
     q = (0.7, 1.9)
     ss = stonesoup_linear.KnownTurnRate(turn_noise_diff_coeffs=np.array(q), turn_rate=omega)
-    ct = CoordinatedTurn(omega, tau, jnp.array(q))
+    ct = CoordinatedTurn(tau, turn_rate=omega, noise_intensity=jnp.array(q))
     F_ss = _permute(ss.matrix(time_interval=_dt(tau)), P4)
     Q_ss = _permute(ss.covar(time_interval=_dt(tau)), P4)
     x_ss = np.array([10.0, -3.0, -25.0, 7.5])
@@ -75,7 +75,7 @@ def test_coordinated_turn_matches_stonesoup_known_turn_rate(omega, tau):
 def test_nearly_constant_turn_matches_stonesoup_constant_turn(omega, tau):
     q, q_omega = (0.7, 1.9), 0.03
     ss = stonesoup_nonlinear.ConstantTurn(linear_noise_coeffs=np.array(q), turn_noise_coeff=q_omega)
-    nct = NearlyConstantTurn(tau, jnp.array(q), q_omega)
+    nct = NearlyConstantTurn(tau, noise_intensity=jnp.array(q), turn_rate_intensity=q_omega)
     x_ss = np.array([10.0, -3.0, -25.0, 7.5, omega])
     state = State(StateVector(x_ss))
     fx_ss = np.asarray(ss.function(state, time_interval=_dt(tau))).ravel()[P5]
@@ -121,9 +121,9 @@ def _cv_limit_derivative(tau):
 def test_coordinated_turn_limit_at_zero_turn_rate(tau):
     @jax.jit
     def F(omega):
-        return CoordinatedTurn(omega, tau, 1.0).transition_matrix(0)
+        return CoordinatedTurn(tau, turn_rate=omega, noise_intensity=1.0).transition_matrix(0)
 
-    F_cv = ConstantVelocity(tau, 1.0, dim=2).transition_matrix(0)
+    F_cv = ConstantVelocity(tau, noise_intensity=1.0, dim=2).transition_matrix(0)
     np.testing.assert_array_equal(F(0.0), F_cv)
     # Continuity into the limit and across the series/closed-form switch at |ωτ| = 0.5.
     dF0 = jax.jacfwd(F)(0.0)
@@ -170,13 +170,13 @@ def test_turn_functions_series_and_closed_form_agree():
 
 @pytest.mark.parametrize("tau", [0.5, 2.0])
 def test_nearly_constant_turn_jacobian_limit_at_zero(tau):
-    nct = NearlyConstantTurn(tau, 0.3, 0.01)
+    nct = NearlyConstantTurn(tau, noise_intensity=0.3, turn_rate_intensity=0.01)
     vx, vy = 3.0, -4.0
     x = jnp.array([1.0, 2.0, vx, vy, 0.0])
     J = nct.jacobian(x, 0)
     limit = np.array([-(tau**2) * vy / 2, tau**2 * vx / 2, -tau * vy, tau * vx, 1.0])
     np.testing.assert_allclose(J[:, 4], limit, rtol=0, atol=1e-14)
-    np.testing.assert_allclose(J[:4, :4], ConstantVelocity(tau, 1.0).transition_matrix(0), atol=1e-15)
+    np.testing.assert_allclose(J[:4, :4], ConstantVelocity(tau, noise_intensity=1.0).transition_matrix(0), atol=1e-15)
     np.testing.assert_allclose(jax.jacfwd(nct.mean)(x, 0), J, rtol=0, atol=1e-14)
     # The Jacobian is itself differentiable at ω = 0 (finite second derivatives).
     assert np.all(np.isfinite(jax.jacfwd(nct.jacobian)(x, 0)))
@@ -192,13 +192,14 @@ def test_nearly_constant_turn_jacobian_limit_at_zero(tau):
 
 def _models():
     return [
-        ConstantVelocity(0.7, jnp.array([0.2, 0.5, 1.0]), dim=3),
-        ConstantAcceleration(0.4, 0.3, dim=2),
-        CoordinatedTurn(-0.2, 1.5, 0.4),
-        CoordinatedTurn(0.9, 0.8, jnp.array([0.4, 0.4, 0.1]), dim=3),
+        ConstantVelocity(0.7, noise_intensity=jnp.array([0.2, 0.5, 1.0]), dim=3),
+        ConstantAcceleration(0.4, noise_intensity=0.3, dim=2),
+        CoordinatedTurn(1.5, turn_rate=-0.2, noise_intensity=0.4),
+        CoordinatedTurn(0.8, turn_rate=0.9, noise_intensity=jnp.array([0.4, 0.4, 0.1]), dim=3),
         LinearTransition(jnp.array([[1.0, 0.5], [-0.2, 0.9]]), jnp.eye(2)),
         BlockTransition(
-            [NearlyConstantTurn(1.2, 0.3, 0.02), ConstantVelocity(1.2, 0.1, dim=1)],
+            [NearlyConstantTurn(1.2, noise_intensity=0.3, turn_rate_intensity=0.02), ConstantVelocity(1.2,
+                noise_intensity=0.1, dim=1)],
             order=(0, 1, 3, 4, 6, 2, 5),
         ),
     ]
@@ -218,7 +219,7 @@ def test_linear_and_block_jacobians_match_jacfwd(index):
 def test_nearly_constant_turn_jacobian_matches_jacfwd():
     omegas = jnp.array([-2.3, -0.6, -0.5, -0.2, -1e-7, 0.0, 1e-9, 0.05, 0.25, 0.5, 1.1, 4.0])
     for tau in (0.5, 2.0):
-        nct = NearlyConstantTurn(tau, jnp.array([0.3, 0.5]), 0.02)
+        nct = NearlyConstantTurn(tau, noise_intensity=jnp.array([0.3, 0.5]), turn_rate_intensity=0.02)
         xs = jnp.stack([jnp.array([100.0, -50.0, 12.0, -7.0, w]) for w in omegas])
 
         @jax.jit
@@ -250,7 +251,7 @@ def test_coordinated_turn_gradients_match_finite_differences(omega):
     wq = jnp.asarray(rng.normal(size=(6, 6)))
 
     def loss(om, tau, q):
-        ct = CoordinatedTurn(om, tau, jnp.stack([q, 2 * q, 0.5 * q]), dim=3)
+        ct = CoordinatedTurn(tau, turn_rate=om, noise_intensity=jnp.stack([q, 2 * q, 0.5 * q]), dim=3)
         return wm @ ct.mean(x, 0) + jnp.sum(wq * ct.noise_cov(0))
 
     args = (omega, 1.7, 0.3)
@@ -273,7 +274,7 @@ def test_nearly_constant_turn_gradients_match_finite_differences(omega):
     w = jnp.array([0.3, -1.1, 0.7, 0.2, 0.5])
 
     def loss(tau, q_omega, om):
-        nct = NearlyConstantTurn(tau, jnp.array([0.2, 0.4]), q_omega)
+        nct = NearlyConstantTurn(tau, noise_intensity=jnp.array([0.2, 0.4]), turn_rate_intensity=q_omega)
         xx = x.at[4].set(om)
         # Through the mean, the Jacobian (as an EKF would) and Q.
         return w @ nct.mean(xx, 0) + jnp.sum(nct.jacobian(xx, 0) ** 2) + jnp.sum(nct.noise_cov(0))
@@ -299,7 +300,7 @@ def test_nearly_constant_turn_gradients_match_finite_differences(omega):
 def test_per_axis_constant_velocity_blocks_equal_constant_velocity(dim, per_step):
     taus = jnp.array([0.3, 1.1, 2.0, 0.7]) if per_step else jnp.array(1.3)
     q = jnp.array([0.5, 2.0, 0.1])[:dim]
-    block = BlockTransition.per_axis([ConstantVelocity(taus, q[i], dim=1) for i in range(dim)])
+    block = BlockTransition.per_axis([ConstantVelocity(taus, noise_intensity=q[i], dim=1) for i in range(dim)])
     ref = constant_velocity(taus, dim=dim, accel_psd=q, measurement_std=1.0, initial_cov=jnp.eye(2 * dim))
     x = jnp.arange(1.0, 2 * dim + 1)
     assert block.num_steps == (4 if per_step else None)
@@ -309,18 +310,18 @@ def test_per_axis_constant_velocity_blocks_equal_constant_velocity(dim, per_step
         np.testing.assert_allclose(block.noise_cov(k), Q_ref, rtol=0, atol=1e-14)
         np.testing.assert_allclose(block.mean(x, k), F_ref @ x, rtol=0, atol=1e-13)
         # The multi-axis component is the same model.
-        cv = ConstantVelocity(taus, q, dim=dim)
+        cv = ConstantVelocity(taus, noise_intensity=q, dim=dim)
         np.testing.assert_allclose(cv.transition_matrix(k), F_ref, rtol=0, atol=1e-14)
         np.testing.assert_allclose(cv.noise_cov(k), Q_ref, rtol=0, atol=1e-14)
 
 
 def test_constant_acceleration_component_equals_builder():
-    ca = ConstantAcceleration(0.6, jnp.array([0.2, 0.9]), dim=2)
+    ca = ConstantAcceleration(0.6, noise_intensity=jnp.array([0.2, 0.9]), dim=2)
     ref = constant_acceleration(0.6, dim=2, jerk_psd=jnp.array([0.2, 0.9]), measurement_std=1.0,
                                 initial_cov=jnp.eye(6))
     np.testing.assert_allclose(ca.transition_matrix(0), ref.F, rtol=0, atol=1e-14)
     np.testing.assert_allclose(ca.noise_cov(0), ref.Q, rtol=0, atol=1e-14)
-    per_axis = BlockTransition.per_axis([ConstantAcceleration(0.6, q, dim=1) for q in (0.2, 0.9)])
+    per_axis = BlockTransition.per_axis([ConstantAcceleration(0.6, noise_intensity=q, dim=1) for q in (0.2, 0.9)])
     assert per_axis.order == (0, 2, 4, 1, 3, 5)
     np.testing.assert_allclose(per_axis.noise_cov(0), ref.Q, rtol=0, atol=1e-14)
 
@@ -328,9 +329,10 @@ def test_constant_acceleration_component_equals_builder():
 @pytest.mark.parametrize("omega", [-0.7, 0.0, 0.02, 1.5])
 def test_block_3d_coordinated_turn_equals_dedicated(omega):
     tau, q = 1.4, jnp.array([0.3, 0.5, 0.05])
-    dedicated = CoordinatedTurn(omega, tau, q, dim=3)
+    dedicated = CoordinatedTurn(tau, turn_rate=omega, noise_intensity=q, dim=3)
     block = BlockTransition(
-        [CoordinatedTurn(omega, tau, q[:2]), ConstantVelocity(tau, q[2], dim=1)], order=(0, 1, 3, 4, 2, 5)
+        [CoordinatedTurn(tau, turn_rate=omega, noise_intensity=q[:2]), ConstantVelocity(tau, noise_intensity=q[2],
+            dim=1)], order=(0, 1, 3, 4, 2, 5)
     )
     x = jnp.array([100.0, -20.0, 3000.0, 150.0, 40.0, -2.0])
     np.testing.assert_allclose(block.mean(x, 0), dedicated.mean(x, 0), rtol=0, atol=1e-14 * 3000)
@@ -340,7 +342,8 @@ def test_block_3d_coordinated_turn_equals_dedicated(omega):
 
 def test_block_transition_order_is_a_permutation_matrix_conjugation():
     # Reference by explicit matrices: u = P x, J_x = Pᵀ blockdiag(J_i) P, Q_x = Pᵀ blockdiag(Q_i) P.
-    blocks = [NearlyConstantTurn(0.9, 0.3, 0.01), ConstantAcceleration(0.9, 0.2, dim=1)]
+    blocks = [NearlyConstantTurn(0.9, noise_intensity=0.3, turn_rate_intensity=0.01), ConstantAcceleration(0.9,
+        noise_intensity=0.2, dim=1)]
     order = (6, 0, 3, 7, 1, 2, 5, 4)
     model = BlockTransition(blocks, order=order)
     P = np.eye(8)[list(order)]
@@ -360,26 +363,28 @@ def test_block_transition_order_is_a_permutation_matrix_conjugation():
 
 def test_per_step_coordinated_turn():
     omegas, taus = jnp.array([0.0, 0.3, -0.2]), jnp.array([1.0, 0.5, 2.0])
-    ct = CoordinatedTurn(omegas, taus, 0.4)
+    ct = CoordinatedTurn(taus, turn_rate=omegas, noise_intensity=0.4)
     assert ct.num_steps == 3
     for k in range(3):
-        single = CoordinatedTurn(omegas[k], taus[k], 0.4)
+        single = CoordinatedTurn(taus[k], turn_rate=omegas[k], noise_intensity=0.4)
         np.testing.assert_array_equal(ct.transition_matrix(k), single.transition_matrix(0))
         np.testing.assert_array_equal(ct.noise_cov(k), single.noise_cov(0))
     # Inside a scan the step index is traced.
     Fs = jax.lax.map(ct.transition_matrix, jnp.arange(3))
-    np.testing.assert_array_equal(Fs[1], CoordinatedTurn(0.3, 0.5, 0.4).transition_matrix(0))
+    np.testing.assert_array_equal(Fs[1], CoordinatedTurn(0.5, turn_rate=0.3, noise_intensity=0.4).transition_matrix(0))
     with pytest.raises(InputError, match="`turn_rate` has 3.*`sample_period` has 2"):
-        CoordinatedTurn(omegas, taus[:2], 0.4)
+        CoordinatedTurn(taus[:2], turn_rate=omegas, noise_intensity=0.4)
     with pytest.raises(InputError, match="`blocks` disagree on the number of steps"):
-        BlockTransition([ConstantVelocity(taus, 1.0, dim=1), ConstantVelocity(taus[:2], 1.0, dim=1)])
+        BlockTransition([ConstantVelocity(taus, noise_intensity=1.0, dim=1), ConstantVelocity(taus[:2],
+            noise_intensity=1.0, dim=1)])
 
 
 def test_float32_inputs_stay_float32():
     f32 = jnp.float32
-    ct = CoordinatedTurn(jnp.array(0.0, f32), jnp.array(1.0, f32), jnp.array(0.1, f32))
+    ct = CoordinatedTurn(jnp.array(1.0, f32), turn_rate=jnp.array(0.0, f32), noise_intensity=jnp.array(0.1, f32))
     assert ct.transition_matrix(0).dtype == f32 and ct.noise_cov(0).dtype == f32
-    nct = NearlyConstantTurn(jnp.array(1.0, f32), jnp.array(0.1, f32), jnp.array(0.01, f32))
+    nct = NearlyConstantTurn(jnp.array(1.0, f32), noise_intensity=jnp.array(0.1, f32),
+                             turn_rate_intensity=jnp.array(0.01, f32))
     x = jnp.array([1, 2, 3, 4, 0.0], f32)
     assert nct.mean(x, 0).dtype == f32 and nct.jacobian(x, 0).dtype == f32
     assert nct.noise_cov(0).dtype == f32
@@ -393,28 +398,28 @@ def test_float32_inputs_stay_float32():
 @pytest.mark.parametrize(
     "build,name",
     [
-        (lambda: CoordinatedTurn(0.1, -1.0, 0.1), "sample_period"),
-        (lambda: CoordinatedTurn(0.1, 1.0, -0.1), "noise_intensity"),
-        (lambda: CoordinatedTurn(0.1, 1.0, jnp.ones(3)), "noise_intensity"),
-        (lambda: CoordinatedTurn(jnp.ones((2, 2)), 1.0, 0.1), "turn_rate"),
-        (lambda: CoordinatedTurn(jnp.nan, 1.0, 0.1), "turn_rate"),
-        (lambda: CoordinatedTurn(0.1, 1.0, 0.1, dim=1), "dim"),
-        (lambda: ConstantVelocity(0.0, 0.1), "sample_period"),
-        (lambda: ConstantVelocity(1.0, 0.1, dim=4), "dim"),
-        (lambda: ConstantAcceleration(1.0, jnp.array([0.1, -0.2]), dim=2), "noise_intensity"),
-        (lambda: NearlyConstantTurn(1.0, 0.1, -0.01), "turn_rate_intensity"),
-        (lambda: NearlyConstantTurn(-1.0, 0.1, 0.01), "sample_period"),
+        (lambda: CoordinatedTurn(-1.0, turn_rate=0.1, noise_intensity=0.1), "sample_period"),
+        (lambda: CoordinatedTurn(1.0, turn_rate=0.1, noise_intensity=-0.1), "noise_intensity"),
+        (lambda: CoordinatedTurn(1.0, turn_rate=0.1, noise_intensity=jnp.ones(3)), "noise_intensity"),
+        (lambda: CoordinatedTurn(1.0, turn_rate=jnp.ones((2, 2)), noise_intensity=0.1), "turn_rate"),
+        (lambda: CoordinatedTurn(1.0, turn_rate=jnp.nan, noise_intensity=0.1), "turn_rate"),
+        (lambda: CoordinatedTurn(1.0, turn_rate=0.1, noise_intensity=0.1, dim=1), "dim"),
+        (lambda: ConstantVelocity(0.0, noise_intensity=0.1), "sample_period"),
+        (lambda: ConstantVelocity(1.0, noise_intensity=0.1, dim=4), "dim"),
+        (lambda: ConstantAcceleration(1.0, noise_intensity=jnp.array([0.1, -0.2]), dim=2), "noise_intensity"),
+        (lambda: NearlyConstantTurn(1.0, noise_intensity=0.1, turn_rate_intensity=-0.01), "turn_rate_intensity"),
+        (lambda: NearlyConstantTurn(-1.0, noise_intensity=0.1, turn_rate_intensity=0.01), "sample_period"),
         (lambda: LinearTransition(jnp.eye(3), jnp.eye(2)), "process_noise_cov"),
         (lambda: LinearTransition(jnp.ones(3), jnp.eye(3)), "transition_matrix"),
         (lambda: LinearTransition(jnp.eye(2), -jnp.eye(2)), "process_noise_cov"),
         (lambda: BlockTransition([]), "blocks"),
-        (lambda: BlockTransition([ConstantVelocity(1.0, 0.1, dim=1), "cv"]), "blocks"),
-        (lambda: BlockTransition([ConstantVelocity(1.0, 0.1, dim=1)], order=(0, 0)), "order"),
-        (lambda: BlockTransition([ConstantVelocity(1.0, 0.1, dim=1)], order=(0, 1, 2)), "order"),
-        (lambda: BlockTransition([ConstantVelocity(1.0, 0.1, dim=1)], order=(0.0, 1.0)), "order"),
-        (lambda: BlockTransition([ConstantVelocity(1.0, 0.1, dim=1)], order=(1, 2)), "order"),
-        (lambda: BlockTransition.per_axis([ConstantVelocity(1.0, 0.1, dim=1),
-                                           ConstantAcceleration(1.0, 0.1, dim=1)]), "blocks"),
+        (lambda: BlockTransition([ConstantVelocity(1.0, noise_intensity=0.1, dim=1), "cv"]), "blocks"),
+        (lambda: BlockTransition([ConstantVelocity(1.0, noise_intensity=0.1, dim=1)], order=(0, 0)), "order"),
+        (lambda: BlockTransition([ConstantVelocity(1.0, noise_intensity=0.1, dim=1)], order=(0, 1, 2)), "order"),
+        (lambda: BlockTransition([ConstantVelocity(1.0, noise_intensity=0.1, dim=1)], order=(0.0, 1.0)), "order"),
+        (lambda: BlockTransition([ConstantVelocity(1.0, noise_intensity=0.1, dim=1)], order=(1, 2)), "order"),
+        (lambda: BlockTransition.per_axis([ConstantVelocity(1.0, noise_intensity=0.1, dim=1),
+                                           ConstantAcceleration(1.0, noise_intensity=0.1, dim=1)]), "blocks"),
     ],
 )
 def test_bad_arguments_raise_input_error_naming_them(build, name):
@@ -483,7 +488,7 @@ def _simulate(model, x0, steps, key):
 
 def test_ekf_on_coordinated_turn_equals_kalman_filter():
     tau, omega, steps = 1.0, 0.08, 60
-    ct = CoordinatedTurn(omega, tau, 0.05)
+    ct = CoordinatedTurn(tau, turn_rate=omega, noise_intensity=0.05)
     x0 = jnp.array([0.0, 0.0, 20.0, 0.0])
     _, zs = _simulate(ct, x0, steps, jax.random.PRNGKey(1))
     P0 = jnp.diag(jnp.array([100.0, 100.0, 25.0, 25.0]))
@@ -499,7 +504,7 @@ def test_ekf_on_coordinated_turn_equals_kalman_filter():
 
 def test_ekf_on_nearly_constant_turn_analytic_equals_jacfwd_and_tracks_the_turn():
     tau, omega, steps = 1.0, 0.06, 120
-    nct = NearlyConstantTurn(tau, 0.02, 1e-6)
+    nct = NearlyConstantTurn(tau, noise_intensity=0.02, turn_rate_intensity=1e-6)
     truth, zs = _simulate(nct, jnp.array([0.0, 0.0, 15.0, 0.0, omega]), steps, jax.random.PRNGKey(7))
     m0 = jnp.array([0.0, 0.0, 15.0, 0.0, 0.0])  # starts believing in a straight line
     P0 = jnp.diag(jnp.array([50.0, 50.0, 10.0, 10.0, 0.01]))
@@ -518,11 +523,12 @@ def test_ekf_on_nearly_constant_turn_analytic_equals_jacfwd_and_tracks_the_turn(
 def test_gradient_of_ekf_log_likelihood_wrt_turn_rate():
     tau, steps = 1.0, 30
     x0 = jnp.array([0.0, 0.0, 20.0, 0.0])
-    _, zs = _simulate(CoordinatedTurn(0.1, tau, 0.05), x0, steps, jax.random.PRNGKey(2))
+    _, zs = _simulate(CoordinatedTurn(tau, turn_rate=0.1, noise_intensity=0.05), x0, steps, jax.random.PRNGKey(2))
     P0 = 10.0 * jnp.eye(4)
 
     def loglik(omega):
-        model = TrackingModel(CoordinatedTurn(omega, tau, 0.05), _PositionSensor(jnp.array(5.0), 4), x0, P0)
+        model = TrackingModel(CoordinatedTurn(tau, turn_rate=omega, noise_intensity=0.05),
+                              _PositionSensor(jnp.array(5.0), 4), x0, P0)
         return run_filter(ExtendedKalmanFilter(), model, zs, save="final", throw=False).log_likelihood
 
     # Forward mode (one scalar parameter; compiles several times faster than reverse mode here),
@@ -538,3 +544,32 @@ def test_exports():
     for name in ("BlockTransition", "ConstantAcceleration", "ConstantVelocity", "CoordinatedTurn",
                  "LinearTransition", "NearlyConstantTurn"):
         assert getattr(jaxtrack.models, name) is not None
+
+
+@pytest.mark.parametrize(
+    "old, new",
+    [
+        (lambda: CoordinatedTurn(0.05, 2.0, 0.3), lambda: CoordinatedTurn(2.0, turn_rate=0.05, noise_intensity=0.3)),
+        (lambda: ConstantVelocity(2.0, 0.3, dim=3), lambda: ConstantVelocity(2.0, noise_intensity=0.3, dim=3)),
+        (lambda: ConstantAcceleration(2.0, 0.3), lambda: ConstantAcceleration(2.0, noise_intensity=0.3)),
+        (lambda: NearlyConstantTurn(2.0, 0.3, 1e-3),
+         lambda: NearlyConstantTurn(2.0, noise_intensity=0.3, turn_rate_intensity=1e-3)),
+    ],
+)
+def test_motion_models_take_the_period_first_and_the_rest_by_keyword(old, new):
+    """One call shape (issue 37: CoordinatedTurn took the turn rate first, the others the period).
+    The old positional form works for one release, read in its old order, with a warning that
+    spells the new call."""
+    with pytest.warns(DeprecationWarning, match=r"positional arguments after the sample period are deprecated.*write"):
+        a = old()
+    b = new()
+    for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)):
+        np.testing.assert_array_equal(x, y)
+    assert jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b)
+
+
+def test_a_missing_keyword_is_named():
+    with pytest.raises(InputError, match=r"`turn_rate` is required \(keyword\)"):
+        CoordinatedTurn(1.0, noise_intensity=0.1)
+    with pytest.raises(TypeError, match="multiple values for argument 'noise_intensity'"):
+        ConstantVelocity(1.0, 0.5, noise_intensity=0.5)

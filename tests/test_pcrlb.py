@@ -142,7 +142,7 @@ def test_nonlinear_bound_is_block_of_inverse_trajectory_fisher_same_draws():
     true trajectories the two constructions differ only algebraically (tolerance 1e-8).
     """
     T, N = 6, 300
-    model = TrackingModel(ConstantVelocity(1.0, 0.5, dim=2),
+    model = TrackingModel(ConstantVelocity(1.0, noise_intensity=0.5, dim=2),
                           RangeBearing(noise_std=(2.0, 0.02), sensor_position=(-100.0, 50.0)),
                           np.array([50.0, 80.0, 2.0, -1.0]), np.diag([100.0, 100.0, 4.0, 4.0]))
     key = jax.random.key(7)
@@ -272,7 +272,7 @@ _SS_P0 = np.diag([400.0, 400.0, 4.0, 4.0])
 def test_pcrlb_along_matches_stonesoup_pcrb_metric_range_bearing(irf):
     pytest.importorskip("stonesoup")
     sigma_r, sigma_phi, sensor = 5.0, 0.02, np.array([-200.0, 150.0])
-    model = TrackingModel(ConstantVelocity(_SS_TAUS, _SS_Q, dim=2),
+    model = TrackingModel(ConstantVelocity(_SS_TAUS, noise_intensity=_SS_Q, dim=2),
                           RangeBearing(noise_std=(sigma_r, sigma_phi), sensor_position=sensor), _SS_M0, _SS_P0)
     X = np.asarray(simulate(model, jax.random.key(3), _SS_T).states)
     measurement = _analytic_bearing_range()(ndim_state=4, mapping=(0, 2),

@@ -52,11 +52,12 @@ def imm_result():
     x0, p0 = np.array([2000.0, 1000.0, -15.0, 10.0]), np.diag([400.0, 400.0, 25.0, 25.0])
     sensor = RangeBearing(np.array([10.0, 0.004]))
     omega = np.where((np.arange(T) >= 10) & (np.arange(T) < 20), 0.06, 0.0)
-    truth = TrackingModel(CoordinatedTurn(omega, tau, 0.05), sensor, x0, p0)
+    truth = TrackingModel(CoordinatedTurn(tau, turn_rate=omega, noise_intensity=0.05), sensor, x0, p0)
     x5, p5 = np.append(x0, 0.0), np.diag(np.append(np.diag(p0), 0.01))
     members = [
-        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(tau, 0.05), sensor, x0, p0)),
-        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(tau, 0.05, 1e-4), sensor, x5, p5)),
+        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(tau, noise_intensity=0.05), sensor, x0, p0)),
+        (ExtendedKalmanFilter(), TrackingModel(NearlyConstantTurn(tau, noise_intensity=0.05,
+                                                                  turn_rate_intensity=1e-4), sensor, x5, p5)),
     ]
     imm = InteractingMultipleModel(members, np.array([[0.9, 0.1], [0.1, 0.9]]))
     return monte_carlo(truth, jax.random.key(3), 8, filter=imm, filter_components=(0, 1, 2, 3), progress=False)

@@ -294,8 +294,8 @@ def _cv_on(sensor, dim):
     n = 2 * dim
     cov = jnp.diag(jnp.concatenate([jnp.full(dim, 1e4), jnp.full(dim, 50.0)]) ** 2)
     x0 = jnp.array([8e3, 12e3, 3e3][:dim] + [-100.0, 20.0, 0.0][:dim])
-    truth = TrackingModel(ConstantVelocity(1.0, 0.1, dim=dim), sensor, x0, cov)
-    return truth, TrackingModel(ConstantVelocity(1.0, 0.1, dim=dim), sensor, jnp.zeros(n), cov)
+    truth = TrackingModel(ConstantVelocity(1.0, noise_intensity=0.1, dim=dim), sensor, x0, cov)
+    return truth, TrackingModel(ConstantVelocity(1.0, noise_intensity=0.1, dim=dim), sensor, jnp.zeros(n), cov)
 
 
 SENSORS_AT_ORIGIN = {

@@ -40,20 +40,23 @@ CV3 = ("x", "y", "z", "vx", "vy", "vz")
 @pytest.mark.parametrize(
     "model, layout",
     [
-        (ConstantVelocity(1.0, 0.1), CV2),
-        (ConstantVelocity(1.0, 0.1, dim=3), CV3),
-        (ConstantVelocity(1.0, 0.1, dim=1), ("x", "vx")),
-        (ConstantAcceleration(1.0, 0.1), ("x", "y", "vx", "vy", "ax", "ay")),
-        (CoordinatedTurn(0.05, 1.0, 0.1), CV2),
-        (CoordinatedTurn(0.05, 1.0, 0.1, dim=3), CV3),
-        (NearlyConstantTurn(1.0, 0.1, 1e-4), CV2 + ("omega",)),
+        (ConstantVelocity(1.0, noise_intensity=0.1), CV2),
+        (ConstantVelocity(1.0, noise_intensity=0.1, dim=3), CV3),
+        (ConstantVelocity(1.0, noise_intensity=0.1, dim=1), ("x", "vx")),
+        (ConstantAcceleration(1.0, noise_intensity=0.1), ("x", "y", "vx", "vy", "ax", "ay")),
+        (CoordinatedTurn(1.0, turn_rate=0.05, noise_intensity=0.1), CV2),
+        (CoordinatedTurn(1.0, turn_rate=0.05, noise_intensity=0.1, dim=3), CV3),
+        (NearlyConstantTurn(1.0, noise_intensity=0.1, turn_rate_intensity=1e-4), CV2 + ("omega",)),
         (LinearTransition(np.eye(3), np.eye(3)), None),
         (LinearTransition(np.eye(2), np.eye(2), state_layout=("r", "rdot")), ("r", "rdot")),
         # a 2-D turn then 1-D CV: the CV block's axis is the one after the turn's (z)
-        (BlockTransition([CoordinatedTurn(0.05, 1.0, 0.1), ConstantVelocity(1.0, 0.01, dim=1)],
+        (BlockTransition([CoordinatedTurn(1.0, turn_rate=0.05, noise_intensity=0.1), ConstantVelocity(1.0,
+            noise_intensity=0.01, dim=1)],
                          order=(0, 1, 3, 4, 2, 5)), CV3),
-        (BlockTransition.per_axis([ConstantVelocity(1.0, 0.5, dim=1), ConstantVelocity(1.0, 2.0, dim=1)]), CV2),
-        (BlockTransition([ConstantVelocity(1.0, 0.5, dim=1), LinearTransition(np.eye(1), np.eye(1))]), None),
+        (BlockTransition.per_axis([ConstantVelocity(1.0, noise_intensity=0.5, dim=1), ConstantVelocity(1.0,
+            noise_intensity=2.0, dim=1)]), CV2),
+        (BlockTransition([ConstantVelocity(1.0, noise_intensity=0.5, dim=1), LinearTransition(np.eye(1), np.eye(1))]),
+         None),
     ],
 )
 def test_motion_models_declare_their_layout(model, layout):
@@ -99,16 +102,17 @@ def test_declared_layout_is_validated(bad):
 def test_3d_radar_on_a_2d_state_is_refused():
     """Cause 2: RangeAzimuthElevation's default position_indices (0, 1, 2) read vx as height."""
     with pytest.raises(InputError, match=r"position_indices.*\('x', 'y', 'vx'\).*\('x', 'y', 'z'\)"):
-        TrackingModel(ConstantVelocity(1.0, 0.1), RangeAzimuthElevation(noise_std=(1.0, 0.01, 0.01)),
+        TrackingModel(ConstantVelocity(1.0, noise_intensity=0.1), RangeAzimuthElevation(noise_std=(1.0, 0.01, 0.01)),
                       np.zeros(4), np.eye(4))
     # on a 3-D state it is right, and a 2-D radar reads the horizontal plane of a 3-D state
-    TrackingModel(ConstantVelocity(1.0, 0.1, dim=3), RangeAzimuthElevation(noise_std=(1.0, 0.01, 0.01)),
+    TrackingModel(ConstantVelocity(1.0, noise_intensity=0.1, dim=3), RangeAzimuthElevation(noise_std=(1.0, 0.01, 0.01)),
                   np.ones(6), np.eye(6))
-    TrackingModel(ConstantVelocity(1.0, 0.1, dim=3), RangeBearing(noise_std=(1.0, 0.01)), np.ones(6), np.eye(6))
+    TrackingModel(ConstantVelocity(1.0, noise_intensity=0.1, dim=3), RangeBearing(noise_std=(1.0, 0.01)), np.ones(6),
+                  np.eye(6))
 
 
 def test_range_rate_must_read_velocities():
-    nct = NearlyConstantTurn(1.0, 0.1, 1e-4)
+    nct = NearlyConstantTurn(1.0, noise_intensity=0.1, turn_rate_intensity=1e-4)
     bad = RangeBearing(noise_std=(1.0, 0.01, 0.1), range_rate=True, velocity_indices=(2, 4))
     with pytest.raises(InputError, match=r"velocity_indices.*pass velocity_indices=\(2, 3\)"):
         TrackingModel(nct, bad, np.ones(5), np.eye(5))
@@ -146,7 +150,7 @@ SENSOR3 = (-2000.0, 500.0, 0.0)
 
 def _cv3_permuted(order):
     """The 3-D CV model with its state stored in ``order`` (a permutation of CV3), layout declared."""
-    cv = ConstantVelocity(1.0, 0.2, dim=3)
+    cv = ConstantVelocity(1.0, noise_intensity=0.2, dim=3)
     F, Q = np.asarray(cv.transition_matrix(0)), np.asarray(cv.noise_cov(0))
     p = [CV3.index(c) for c in order]
     tr = LinearTransition(F[np.ix_(p, p)], Q[np.ix_(p, p)], state_layout=order)
@@ -157,9 +161,11 @@ def _members(order):
     x2, P2 = np.array([0.0, 0.0, 10.0, 5.0]), np.diag([400.0, 400.0, 25.0, 25.0])
     x3, P3 = np.array([0.0, 0.0, 0.0, 10.0, 5.0, 0.0]), np.diag([400.0, 400.0, 100.0, 25.0, 25.0, 4.0])
     tr3, p = _cv3_permuted(order)
-    sensor3 = RangeBearing(noise_std=RB, sensor_position=SENSOR3[:2], position_indices=(order.index("x"), order.index("y")))
+    sensor3 = RangeBearing(noise_std=RB, sensor_position=SENSOR3[:2], position_indices=(order.index("x"),
+        order.index("y")))
     return [
-        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(1.0, 2.0), RangeBearing(noise_std=RB, sensor_position=SENSOR3[:2]), x2, P2)),
+        (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(1.0, noise_intensity=2.0), RangeBearing(noise_std=RB,
+            sensor_position=SENSOR3[:2]), x2, P2)),
         (ExtendedKalmanFilter(), TrackingModel(tr3, sensor3, x3[p], P3[np.ix_(p, p)])),
     ]
 
@@ -167,7 +173,8 @@ def _members(order):
 @pytest.fixture(scope="module")
 def cv2_cv3_runs():
     """The same IMM of a 2-D and a 3-D CV member, the 3-D state stored in two orders."""
-    truth = TrackingModel(ConstantVelocity(1.0, 0.5), RangeBearing(noise_std=RB, sensor_position=SENSOR3[:2]),
+    truth = TrackingModel(ConstantVelocity(1.0, noise_intensity=0.5), RangeBearing(noise_std=RB,
+        sensor_position=SENSOR3[:2]),
                           np.array([0.0, 0.0, 10.0, 5.0]), np.eye(4))
     z = simulate(truth, 3, 12).measurements
     ptrans = np.array([[0.9, 0.1], [0.2, 0.8]])
@@ -218,14 +225,15 @@ def test_prefix_rule_is_checked_against_declared_layouts():
     """A member without a layout makes the IMM fall back to the prefix rule, which is then checked."""
     members = _members(CV3)
     undeclared = members[0][1]
-    cv = ConstantVelocity(1.0, 2.0)
+    cv = ConstantVelocity(1.0, noise_intensity=2.0)
     bare = TrackingModel(LinearTransition(cv.transition_matrix(0), cv.noise_cov(0)), undeclared.measurement_model,
                          undeclared.initial_mean, undeclared.initial_cov)
     assert bare.state_layout is None
     with pytest.raises(InputError, match=r"not a prefix of \('x', 'y', 'z'"):
         InteractingMultipleModel(members + [(ExtendedKalmanFilter(), bare)], np.eye(3))
     # consistent with the prefix rule (a CV and a turn-rate state): accepted, embedding unchanged
-    nct = TrackingModel(NearlyConstantTurn(1.0, 0.1, 1e-4), undeclared.measurement_model,
+    nct = TrackingModel(NearlyConstantTurn(1.0, noise_intensity=0.1, turn_rate_intensity=1e-4),
+                        undeclared.measurement_model,
                         jnp.append(undeclared.initial_mean, 0.0), np.eye(5))
     imm = InteractingMultipleModel([(ExtendedKalmanFilter(), bare), (ExtendedKalmanFilter(), nct)], np.eye(2))
     assert imm.member_indices == ((0, 1, 2, 3), (0, 1, 2, 3, 4)) and imm.state_layout is None

@@ -31,7 +31,8 @@ T = 6
 
 
 def _ct(turn_rate, sample_period=1.0, noise_intensity=0.1):
-    return TrackingModel(CoordinatedTurn(turn_rate, sample_period, noise_intensity), SENSOR, X0, P0)
+    return TrackingModel(CoordinatedTurn(sample_period, turn_rate=turn_rate, noise_intensity=noise_intensity), SENSOR,
+                         X0, P0)
 
 
 Z = simulate(_ct(0.05), KEY, T).measurements
@@ -57,14 +58,15 @@ def _filter_prior_ok(mean):
 def _range_ok(sample_period, noise_intensity, noise_std):
     """Trajectory.ok and FilterResult.ok of a model whose ranged parameters are traced."""
     sensor = RangeBearing(noise_std=noise_std, sensor_position=(-500.0, 300.0))
-    model = TrackingModel(CoordinatedTurn(0.05, sample_period, noise_intensity), sensor, X0, P0)
+    model = TrackingModel(CoordinatedTurn(sample_period, turn_rate=0.05, noise_intensity=noise_intensity), sensor, X0,
+                          P0)
     return simulate(model, KEY, T, throw=False).ok, run_filter(ExtendedKalmanFilter(), model, Z, throw=False).ok
 
 
 GOOD_STD = np.array([5.0, 0.01])
 
 _MEMBERS = [(ExtendedKalmanFilter(), _ct(0.0)),
-            (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(1.0, 2.0), SENSOR, X0, P0))]
+            (ExtendedKalmanFilter(), TrackingModel(ConstantVelocity(1.0, noise_intensity=2.0), SENSOR, X0, P0))]
 
 
 @jax.jit
@@ -85,7 +87,7 @@ def test_good_values_are_ok_traced():
 def test_sample_period_not_positive(tau):
     """A period <= 0 is rejected concrete; traced it becomes NaN, so both results say ok=False."""
     with pytest.raises(InputError, match="sample_period"):
-        CoordinatedTurn(0.05, tau, 0.1)
+        CoordinatedTurn(tau, turn_rate=0.05, noise_intensity=0.1)
     assert not any(map(bool, _range_ok(tau, 0.1, GOOD_STD)))
 
 
@@ -100,14 +102,14 @@ def test_negative_noise_level(q, which):
         assert not any(map(bool, _range_ok(1.0, 0.1, std)))
     else:
         with pytest.raises(InputError, match="noise_intensity"):
-            CoordinatedTurn(0.05, 1.0, q)
+            CoordinatedTurn(1.0, turn_rate=0.05, noise_intensity=q)
         assert not any(map(bool, _range_ok(1.0, q, GOOD_STD)))
 
 
 def test_the_twin_keeps_good_values_and_their_gradient():
     """Bit for bit and the same derivative as without the twin (it only acts where the value is bad)."""
     def period_sum(tau):
-        return jnp.sum(CoordinatedTurn(0.05, tau, 0.1).noise_cov(0))
+        return jnp.sum(CoordinatedTurn(tau, turn_rate=0.05, noise_intensity=0.1).noise_cov(0))
 
     tau = 0.7
     np.testing.assert_array_equal(jax.jit(period_sum)(tau), period_sum(tau))
@@ -121,7 +123,7 @@ def test_the_twin_keeps_good_values_and_their_gradient():
 @given(bad=NON_FINITE)
 def test_non_finite_turn_rate(bad):
     with pytest.raises(InputError, match="turn_rate"):
-        CoordinatedTurn(bad, 1.0, 0.1)
+        CoordinatedTurn(1.0, turn_rate=bad, noise_intensity=0.1)
     assert not bool(_simulate_ok(bad))
     assert not bool(_filter_ok(bad))
 
@@ -140,7 +142,7 @@ def test_non_finite_prior_mean(bad, where):
     mean = X0.copy()
     mean[where] = bad
     with pytest.raises(InputError, match="initial_mean"):
-        TrackingModel(CoordinatedTurn(0.05, 1.0, 0.1), SENSOR, mean, P0)
+        TrackingModel(CoordinatedTurn(1.0, turn_rate=0.05, noise_intensity=0.1), SENSOR, mean, P0)
     assert not bool(_filter_prior_ok(jnp.asarray(mean)))
 
 

@@ -7,7 +7,7 @@ of each with a Gaussian prior into an :class:`~jaxtrack.models.AbstractStateSpac
 filter, smoother and Monte Carlo routine of jaxtrack accepts::
 
     model = TrackingModel(
-        transition=CoordinatedTurn(turn_rate=0.05, sample_period=1.0, noise_intensity=0.1),
+        transition=CoordinatedTurn(1.0, turn_rate=0.05, noise_intensity=0.1),
         measurement=RangeBearing(noise_std=(10.0, 0.01), sensor_position=(0.0, 0.0)),
         initial_mean=m0, initial_cov=P0,
     )

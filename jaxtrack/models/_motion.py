@@ -35,12 +35,14 @@ diagonal. Without ``order`` the blocks act on consecutive sub-vectors; ``order``
 
     # 3-D target: a horizontal turn on (x, y, vx, vy) and CV on (z, vz), state [x, y, z, vx, vy, vz]
     BlockTransition(
-        [CoordinatedTurn(0.05, 1.0, 0.1), ConstantVelocity(1.0, 0.01, dim=1)],
+        [CoordinatedTurn(1.0, turn_rate=0.05, noise_intensity=0.1),
+         ConstantVelocity(1.0, noise_intensity=0.01, dim=1)],
         order=(0, 1, 3, 4, 2, 5),
     )
 
     # per-axis CV blocks [p, v] with different intensities, state stored [x, y, vx, vy]
-    BlockTransition.per_axis([ConstantVelocity(1.0, 0.5, dim=1), ConstantVelocity(1.0, 2.0, dim=1)])
+    BlockTransition.per_axis([ConstantVelocity(1.0, noise_intensity=0.5, dim=1),
+                              ConstantVelocity(1.0, noise_intensity=2.0, dim=1)])
     # = BlockTransition([...], order=(0, 2, 1, 3))
 
 References: Bar-Shalom, Li & Kirubarajan, *Estimation with Applications to Tracking and
@@ -54,6 +56,7 @@ from __future__ import annotations
 import abc
 import math
 import numbers
+import warnings
 from collections.abc import Sequence
 from typing import ClassVar
 
@@ -78,6 +81,40 @@ def _check_dim(dim, allowed=(1, 2, 3)) -> int:
     if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or int(dim) not in allowed:
         raise InputError(f"`dim` must be one of {allowed} (spatial dimensions); got {dim!r}.")
     return int(dim)
+
+
+def _keyword_args(cls: str, first, args: tuple, old_order: tuple[str, ...], given: dict) -> dict:
+    """The constructor's arguments by name, accepting the deprecated positional form for one release.
+
+    The motion models take the sample period first and everything else by keyword, so that one
+    call shape fits all of them (``CoordinatedTurn`` used to take the turn rate first, the others
+    the period: issue 37). A call with more positional arguments is read in the old order
+    ``old_order`` with a ``DeprecationWarning`` that spells the new call.
+
+    **Raises:** ``TypeError`` for too many positional arguments or one given twice (as Python
+    would), ``InputError`` naming a required keyword that is missing.
+    """
+    if args:
+        values = (first,) + args
+        if len(values) > len(old_order):
+            raise TypeError(f"{cls}() takes at most {len(old_order)} positional arguments ({len(values)} given).")
+        legacy = dict(zip(old_order, values))
+        for name in legacy:
+            if name != "sample_period" and given.get(name) is not None:
+                raise TypeError(f"{cls}() got multiple values for argument {name!r}.")
+        given = {**given, **legacy}
+        spelled = ", ".join([repr(legacy.get("sample_period", "tau"))]
+                            + [f"{k}={v!r}" for k, v in legacy.items() if k != "sample_period"])
+        warnings.warn(
+            f"{cls}: positional arguments after the sample period are deprecated (one call shape for every "
+            f"motion model); write {cls}({spelled}). The positional form stops working in jaxtrack 0.3.",
+            DeprecationWarning, stacklevel=3)
+    else:
+        given = {"sample_period": first, **given}
+    if missing := [k for k in old_order if given.get(k) is None]:
+        raise InputError(f"{cls}: `{missing[0]}` is required (keyword), e.g. {cls}(1.0, "
+                         + ", ".join(f"{k}=..." for k in old_order if k != "sample_period") + ").")
+    return given
 
 
 def _per_axis(name: str, x, dim: int) -> Array:
@@ -258,10 +295,12 @@ class _AbstractKinematic(AbstractTransitionModel):
     dim: int = eqx.field(static=True)
     _order: ClassVar[int]  # states per axis: 2 (p, v) or 3 (p, v, a)
 
-    def __init__(self, sample_period: ArrayLike, noise_intensity: ArrayLike, *, dim: int = 2):
+    def __init__(self, sample_period: ArrayLike, *args, noise_intensity: ArrayLike | None = None, dim: int = 2):
+        a = _keyword_args(type(self).__name__, sample_period, args, ("sample_period", "noise_intensity"),
+                          {"noise_intensity": noise_intensity})
         self.dim = _check_dim(dim)
-        self.sample_period = check_taus("sample_period", sample_period)
-        self.noise_intensity = _per_axis("noise_intensity", noise_intensity, self.dim)
+        self.sample_period = check_taus("sample_period", a["sample_period"])
+        self.noise_intensity = _per_axis("noise_intensity", a["noise_intensity"], self.dim)
 
     @abc.abstractmethod
     def _blocks(self, tau):
@@ -309,7 +348,7 @@ class ConstantVelocity(_AbstractKinematic):
     **Arguments:**
 
     - ``sample_period``: τ, seconds, shape ``()`` or per step ``(T,)``, > 0.
-    - ``noise_intensity``: ``q``, m²/s³, shape ``()`` or per axis ``(dim,)``, ≥ 0.
+    - ``noise_intensity`` (keyword): ``q``, m²/s³, shape ``()`` or per axis ``(dim,)``, ≥ 0.
     - ``dim``: number of axes, 1, 2 or 3 (keyword).
 
     **Raises:** ``InputError`` naming ``sample_period``, ``noise_intensity`` or ``dim``.
@@ -333,7 +372,7 @@ class ConstantAcceleration(_AbstractKinematic):
     **Arguments:**
 
     - ``sample_period``: τ, seconds, shape ``()`` or ``(T,)``, > 0.
-    - ``noise_intensity``: ``q``, m²/s⁵, shape ``()`` or ``(dim,)``, ≥ 0.
+    - ``noise_intensity`` (keyword): ``q``, m²/s⁵, shape ``()`` or ``(dim,)``, ≥ 0.
     - ``dim``: number of axes, 1, 2 or 3 (keyword).
 
     **Raises:** ``InputError`` naming ``sample_period``, ``noise_intensity`` or ``dim``.
@@ -381,9 +420,9 @@ class CoordinatedTurn(AbstractTransitionModel):
 
     **Arguments:**
 
-    - ``turn_rate``: ω, rad/s, shape ``()`` or per step ``(T,)``, finite, any sign.
-    - ``sample_period``: τ, seconds, shape ``()`` or ``(T,)``, > 0.
-    - ``noise_intensity``: ``q``, m²/s³, shape ``()`` or per axis ``(dim,)``, ≥ 0.
+    - ``sample_period``: τ, seconds, shape ``()`` or ``(T,)``, > 0 (the one positional argument).
+    - ``turn_rate`` (keyword): ω, rad/s, shape ``()`` or per step ``(T,)``, finite, any sign.
+    - ``noise_intensity`` (keyword): ``q``, m²/s³, shape ``()`` or per axis ``(dim,)``, ≥ 0.
     - ``dim``: 2 or 3 (keyword).
 
     **Raises:** ``InputError`` naming the argument (negative τ or ``q``, wrong shapes, ``dim``,
@@ -396,12 +435,16 @@ class CoordinatedTurn(AbstractTransitionModel):
     dim: int = eqx.field(static=True)
 
     def __init__(
-        self, turn_rate: ArrayLike, sample_period: ArrayLike, noise_intensity: ArrayLike, *, dim: int = 2
+        self, sample_period: ArrayLike, *args, turn_rate: ArrayLike | None = None,
+        noise_intensity: ArrayLike | None = None, dim: int = 2,
     ):
+        # Deprecated positional form: the old order put the turn rate first.
+        a = _keyword_args("CoordinatedTurn", sample_period, args, ("turn_rate", "sample_period", "noise_intensity"),
+                          {"turn_rate": turn_rate, "noise_intensity": noise_intensity})
         self.dim = _check_dim(dim, (2, 3))
-        self.turn_rate = _check_turn_rate("turn_rate", turn_rate)
-        self.sample_period = check_taus("sample_period", sample_period)
-        self.noise_intensity = _per_axis("noise_intensity", noise_intensity, self.dim)
+        self.turn_rate = _check_turn_rate("turn_rate", a["turn_rate"])
+        self.sample_period = check_taus("sample_period", a["sample_period"])
+        self.noise_intensity = _per_axis("noise_intensity", a["noise_intensity"], self.dim)
         _steps(turn_rate=self.turn_rate, sample_period=self.sample_period)
 
     @property
@@ -476,8 +519,8 @@ class NearlyConstantTurn(AbstractTransitionModel):
     **Arguments:**
 
     - ``sample_period``: τ, seconds, shape ``()`` or per step ``(T,)``, > 0.
-    - ``noise_intensity``: ``q``, m²/s³, shape ``()`` or per axis ``(2,)``, ≥ 0.
-    - ``turn_rate_intensity``: ``q_ω``, rad²/s³, shape ``()``, ≥ 0.
+    - ``noise_intensity`` (keyword): ``q``, m²/s³, shape ``()`` or per axis ``(2,)``, ≥ 0.
+    - ``turn_rate_intensity`` (keyword): ``q_ω``, rad²/s³, shape ``()``, ≥ 0.
 
     **Raises:** ``InputError`` naming the argument.
     """
@@ -486,10 +529,14 @@ class NearlyConstantTurn(AbstractTransitionModel):
     noise_intensity: Float[Array, " 2"]
     turn_rate_intensity: Float[Array, ""]
 
-    def __init__(self, sample_period: ArrayLike, noise_intensity: ArrayLike, turn_rate_intensity: ArrayLike):
-        self.sample_period = check_taus("sample_period", sample_period)
-        self.noise_intensity = _per_axis("noise_intensity", noise_intensity, 2)
-        self.turn_rate_intensity = _check_nonneg("turn_rate_intensity", turn_rate_intensity, [()], strict=False)
+    def __init__(self, sample_period: ArrayLike, *args, noise_intensity: ArrayLike | None = None,
+                 turn_rate_intensity: ArrayLike | None = None):
+        a = _keyword_args("NearlyConstantTurn", sample_period, args,
+                          ("sample_period", "noise_intensity", "turn_rate_intensity"),
+                          {"noise_intensity": noise_intensity, "turn_rate_intensity": turn_rate_intensity})
+        self.sample_period = check_taus("sample_period", a["sample_period"])
+        self.noise_intensity = _per_axis("noise_intensity", a["noise_intensity"], 2)
+        self.turn_rate_intensity = _check_nonneg("turn_rate_intensity", a["turn_rate_intensity"], [()], strict=False)
 
     @property
     def state_dim(self) -> int:

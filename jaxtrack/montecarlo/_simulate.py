@@ -301,10 +301,12 @@ def _simulate_jit(model, key, num_steps, first_step, detection_probability, thro
     else:
         detected = draw_detections(key, detection_probability, dtype)
     ok = jnp.all(jnp.isfinite(xs)) & jnp.all(jnp.isfinite(zs))
-    out = Trajectory(xs, zs, detected, ok)
+    # The model's own checks first: a NaN prior is reported by name, not as "non-finite states"
+    # (chained error_if's fire in order).
+    out = _guard_traced_model(model, Trajectory(xs, zs, detected, ok))
     if throw:
         out = eqx.error_if(out, ~ok, _SIMULATE_FAILED)
-    return _guard_traced_model(model, out)
+    return out
 
 
 def _check_model_values(model: AbstractStateSpaceModel) -> None:

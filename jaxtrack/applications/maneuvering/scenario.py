@@ -75,20 +75,21 @@ def radar() -> RangeBearing:
 
 def truth_model(num_steps: int = NUM_STEPS) -> TrackingModel:
     """The truth: a coordinated turn with the per-step turn rate of :func:`turn_rates`."""
-    motion = CoordinatedTurn(jnp.asarray(turn_rates(num_steps)), TAU, TRUTH_NOISE)
+    motion = CoordinatedTurn(TAU, turn_rate=jnp.asarray(turn_rates(num_steps)), noise_intensity=TRUTH_NOISE)
     return TrackingModel(motion, radar(), jnp.asarray(X0), jnp.asarray(P0))
 
 
 def cv_model(noise: float | Array = CV_ONLY_NOISE) -> TrackingModel:
     """A constant-velocity filter model ``[x, y, vx, vy]`` with white acceleration ``noise`` (m²/s³)."""
-    return TrackingModel(ConstantVelocity(TAU, noise), radar(), jnp.asarray(X0), jnp.asarray(P0))
+    return TrackingModel(ConstantVelocity(TAU, noise_intensity=noise), radar(), jnp.asarray(X0), jnp.asarray(P0))
 
 
 def ct_model(noise: float | Array = TRUTH_NOISE, turn_noise: float | Array = TURN_NOISE) -> TrackingModel:
     """The turn model ``[x, y, vx, vy, ω]``: acceleration ``noise`` (m²/s³), ``turn_noise`` (rad²/s³)."""
     mean = jnp.asarray(np.append(X0, 0.0))
     cov = jnp.asarray(np.diag(np.append(np.diag(P0), TURN_RATE_PRIOR_STD**2)))
-    return TrackingModel(NearlyConstantTurn(TAU, noise, turn_noise), radar(), mean, cov)
+    return TrackingModel(NearlyConstantTurn(TAU, noise_intensity=noise, turn_rate_intensity=turn_noise), radar(),
+                         mean, cov)
 
 
 class ImmParameters(eqx.Module):
