@@ -190,7 +190,7 @@ def test_failed_runs_are_left_out_of_the_dof_sums():
         res = monte_carlo(truth, key, M, num_steps=T, filter_model=filter_model, detection_probability=0.6,
                           progress=False)
     keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(M))
-    trajs = jax.vmap(lambda k: simulate(truth, k, T, detection_probability=0.6))(keys)
+    trajs = jax.vmap(lambda k: simulate(truth, k, T, detection_probability=0.6, throw=False))(keys)
     ok = np.all(np.isfinite(np.asarray(trajs.states)), axis=(1, 2))
     assert 0 < res.num_failed == int((~ok).sum()) < M
     counts = np.asarray(trajs.detected)[ok].sum(axis=0).astype(float)

@@ -497,7 +497,10 @@ def _run_imm_jit(imm, z, observed, first_step, throw):
         state, out = imm.step(state, zk, ok, first_step=first_step)
         return state, (out, state.means, state.covs)
 
-    final, (out, means, covs) = jax.lax.scan(body, imm.init(), (z, observed))
+    # Rematerialised step (no effect without `grad`): a gradient through the IMM (fit_imm,
+    # imm_log_likelihood) recomputes each step from its carry instead of storing ~10³
+    # intermediates per step: a smaller program to compile and less memory traffic.
+    final, (out, means, covs) = jax.lax.scan(jax.checkpoint(body, prevent_cse=False), imm.init(), (z, observed))
     result = IMMResult(
         out.filtered_mean, out.filtered_cov, out.mode_probs, means, covs, out.member_log_likelihoods,
         final.log_likelihood, final.ok,

@@ -128,8 +128,29 @@ def marginal_cov(cov: Array, components) -> Array:
     """
     if components is None:
         return cov
+    run = _contiguous(components)
+    if run is not None:  # a slice, not a gather: fuses, and its derivative is a pad, not a scatter
+        return cov[..., run, run]
     idx = np.asarray(components)
     return cov[..., idx[:, None], idx[None, :]]
+
+
+def _contiguous(components) -> slice | None:
+    """``slice(a, b)`` when ``components`` is ``a, a+1, …, b−1``, else None."""
+    c = [int(i) for i in components]
+    return slice(c[0], c[0] + len(c)) if c and c == list(range(c[0], c[0] + len(c))) else None
+
+
+def take_components(x: Array, components) -> Array:
+    """``x[components]`` along the leading axis (all of ``x`` for None): a slice when contiguous.
+
+    **Arguments:** ``x`` ``(n, ...)``; ``components``: None or ``d`` distinct indices.
+    **Returns:** ``(d, ...)``.
+    """
+    if components is None:
+        return x
+    run = _contiguous(components)
+    return x[run] if run is not None else x[np.asarray(components)]
 
 
 def cholesky_and_inverse(a: Float[Array, "d d"]) -> tuple[Float[Array, "d d"], Float[Array, "d d"]]:

@@ -53,12 +53,16 @@ def _scan_blocks(common_dyn, models_dyn, key, statics, num_runs, block, num_bloc
     """
     common_static, models_static = statics
 
-    @jax.checkpoint
     def one_block(common_dyn, models_dyn, key, start):
         common = eqx.combine(common_dyn, common_static)
         models = eqx.combine(models_dyn, models_static)
         valid = start + jnp.arange(block) < num_runs
         return _block_delta(common, models, key, start, valid)
+
+    if num_blocks > 1:
+        # With one block, checkpointing it saves no memory (its residuals are live during its
+        # backward pass either way) and would put a third copy of the step in the program.
+        one_block = jax.checkpoint(one_block)
 
     def body(totals, start):
         return add_totals(totals, one_block(common_dyn, models_dyn, key, start), start), None
