@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from jaxtrack import InputError
 from jaxtrack.filters import ExtendedKalmanFilter, InteractingMultipleModel, run_filter, run_imm
 from jaxtrack.models import ConstantVelocity, CoordinatedTurn, RangeBearing, TrackingModel
-from jaxtrack.montecarlo import simulate
+from jaxtrack.montecarlo import differentiable_monte_carlo, simulate
 
 SETTINGS = settings(max_examples=8, deadline=None, derandomize=True)
 NON_FINITE = st.sampled_from([np.nan, np.inf, -np.inf])
@@ -155,3 +155,18 @@ def test_non_stochastic_transition_probs(row, delta):
     with pytest.raises(InputError, match="transition_probs"):
         InteractingMultipleModel(_MEMBERS, p)
     assert not bool(_imm_ok(jnp.asarray(p)))
+
+
+@jax.jit
+def _dmc_anees(sample_period):
+    model = TrackingModel(CoordinatedTurn(sample_period, turn_rate=0.05, noise_intensity=0.1), SENSOR, X0, P0)
+    return differentiable_monte_carlo(model, KEY, 8, num_steps=T, filter=ExtendedKalmanFilter()).anees
+
+
+def test_differentiable_monte_carlo_flags_a_traced_bad_period():
+    """The Monte Carlo entry that may be traced: every run fails, is left out and reported (a warning
+    naming the count) and the statistics are NaN, not a number computed backwards in time."""
+    assert np.isfinite(float(_dmc_anees(1.0)))
+    with pytest.warns(RuntimeWarning, match="8 of 8 runs produced a non-finite estimate"):
+        value = float(jax.block_until_ready(_dmc_anees(-1.0)))
+    assert np.isnan(value)
