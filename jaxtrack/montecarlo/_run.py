@@ -310,6 +310,7 @@ def _run_excluding_failures(run, valid):
     twice, which halves its compile time. In the usual case (nothing failed) the second
     iteration takes the cheap branch, so the run time is that of one pass, as before.
     """
+    run = jax.jit(run)  # traced once: eval_shape's trace is reused by the cond below
     shapes = jax.eval_shape(run, valid)
     zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
 
