@@ -263,7 +263,7 @@ def test_monte_carlo_chunk_size_changes_nothing_and_never_recompiles(covariance,
             np.testing.assert_array_equal(getattr(other, name), getattr(results[0], name), err_msg=name)
     # One compilation at most (none if an earlier test compiled the same block): its trace
     # calls the block function once; the re-run that drops failed runs reuses that trace
-    # (montecarlo._run._run_excluding_failures).
+    # (montecarlo._engine.run_excluding_failures).
     assert len(traces) in (0, 1) and len(set(traces)) <= 1, traces
 
 

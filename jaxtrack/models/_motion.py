@@ -56,7 +56,6 @@ from __future__ import annotations
 import abc
 import math
 import numbers
-import warnings
 from collections.abc import Sequence
 from typing import ClassVar
 
@@ -66,6 +65,7 @@ import numpy as np
 from jax.scipy.linalg import block_diag
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._deprecation import keyword_args
 from .._validation import InputError, check_covariance, check_finite, check_shape
 from ._base import _num_steps_of, at_step
 from ._components import AbstractTransitionModel
@@ -81,40 +81,6 @@ def _check_dim(dim, allowed=(1, 2, 3)) -> int:
     if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or int(dim) not in allowed:
         raise InputError(f"`dim` must be one of {allowed} (spatial dimensions); got {dim!r}.")
     return int(dim)
-
-
-def _keyword_args(cls: str, first, args: tuple, old_order: tuple[str, ...], given: dict) -> dict:
-    """The constructor's arguments by name, accepting the deprecated positional form for one release.
-
-    The motion models take the sample period first and everything else by keyword, so that one
-    call shape fits all of them (``CoordinatedTurn`` used to take the turn rate first, the others
-    the period: issue 37). A call with more positional arguments is read in the old order
-    ``old_order`` with a ``DeprecationWarning`` that spells the new call.
-
-    **Raises:** ``TypeError`` for too many positional arguments or one given twice (as Python
-    would), ``InputError`` naming a required keyword that is missing.
-    """
-    if args:
-        values = (first,) + args
-        if len(values) > len(old_order):
-            raise TypeError(f"{cls}() takes at most {len(old_order)} positional arguments ({len(values)} given).")
-        legacy = dict(zip(old_order, values))
-        for name in legacy:
-            if name != "sample_period" and given.get(name) is not None:
-                raise TypeError(f"{cls}() got multiple values for argument {name!r}.")
-        given = {**given, **legacy}
-        spelled = ", ".join([repr(legacy.get("sample_period", "tau"))]
-                            + [f"{k}={v!r}" for k, v in legacy.items() if k != "sample_period"])
-        warnings.warn(
-            f"{cls}: positional arguments after the sample period are deprecated (one call shape for every "
-            f"motion model); write {cls}({spelled}). The positional form stops working in jaxtrack 0.3.",
-            DeprecationWarning, stacklevel=3)
-    else:
-        given = {"sample_period": first, **given}
-    if missing := [k for k in old_order if given.get(k) is None]:
-        raise InputError(f"{cls}: `{missing[0]}` is required (keyword), e.g. {cls}(1.0, "
-                         + ", ".join(f"{k}=..." for k in old_order if k != "sample_period") + ").")
-    return given
 
 
 def _per_axis(name: str, x, dim: int) -> Array:
@@ -296,7 +262,7 @@ class _AbstractKinematic(AbstractTransitionModel):
     _order: ClassVar[int]  # states per axis: 2 (p, v) or 3 (p, v, a)
 
     def __init__(self, sample_period: ArrayLike, *args, noise_intensity: ArrayLike | None = None, dim: int = 2):
-        a = _keyword_args(type(self).__name__, sample_period, args, ("sample_period", "noise_intensity"),
+        a = keyword_args(type(self).__name__, sample_period, args, ("sample_period", "noise_intensity"),
                           {"noise_intensity": noise_intensity})
         self.dim = _check_dim(dim)
         self.sample_period = check_taus("sample_period", a["sample_period"])
@@ -439,7 +405,7 @@ class CoordinatedTurn(AbstractTransitionModel):
         noise_intensity: ArrayLike | None = None, dim: int = 2,
     ):
         # Deprecated positional form: the old order put the turn rate first.
-        a = _keyword_args("CoordinatedTurn", sample_period, args, ("turn_rate", "sample_period", "noise_intensity"),
+        a = keyword_args("CoordinatedTurn", sample_period, args, ("turn_rate", "sample_period", "noise_intensity"),
                           {"turn_rate": turn_rate, "noise_intensity": noise_intensity})
         self.dim = _check_dim(dim, (2, 3))
         self.turn_rate = _check_turn_rate("turn_rate", a["turn_rate"])
@@ -531,7 +497,7 @@ class NearlyConstantTurn(AbstractTransitionModel):
 
     def __init__(self, sample_period: ArrayLike, *args, noise_intensity: ArrayLike | None = None,
                  turn_rate_intensity: ArrayLike | None = None):
-        a = _keyword_args("NearlyConstantTurn", sample_period, args,
+        a = keyword_args("NearlyConstantTurn", sample_period, args,
                           ("sample_period", "noise_intensity", "turn_rate_intensity"),
                           {"noise_intensity": noise_intensity, "turn_rate_intensity": turn_rate_intensity})
         self.sample_period = check_taus("sample_period", a["sample_period"])
@@ -673,12 +639,9 @@ class BlockTransition(AbstractTransitionModel):
 
     @property
     def state_layout(self) -> tuple[str, ...] | None:
-        """The blocks' layouts, each block's axes after the previous blocks' (None if one is unknown).
-
-        A block does not know which axes it moves: block ``i``'s ``x`` is the first axis after
-        those of blocks ``0 … i−1`` (a 2-D turn then ``ConstantVelocity(dim=1)``: the latter's
-        ``x``, ``vx`` are ``z``, ``vz``), and ``order`` places the concatenated components.
-        """
+        """The blocks' layouts, each block's axes after the previous blocks' (None if one is unknown):
+        a 2-D turn then ``ConstantVelocity(dim=1)`` gives the latter's ``x``, ``vx`` as ``z``, ``vz``;
+        ``order`` places the concatenated components."""
         u, offset = [], 0
         for b in self.blocks:
             lay = b.state_layout

@@ -360,3 +360,28 @@ def monte_carlo_map(
     if reduce == "stack":
         out = jax.tree_util.tree_map(lambda a: a[:num_runs], out)
     return out
+
+
+def run_excluding_failures(run, valid):
+    """``run(valid)``; if a valid run failed, ``run(valid & ok)`` again (same draws) without it.
+
+    Returns ``(per-step sums, ok per run of the first pass)``. The two passes are one
+    ``lax.scan`` of length 2 over a ``lax.cond`` whose other branch passes the first pass's
+    sums on, not a ``cond`` between the first pass and a second copy of it: the block's program
+    (its filter step, and under ``grad`` its transpose) is in the compiled program once, not
+    twice, which halves its compile time. In the usual case (nothing failed) the second
+    iteration takes the cheap branch, so the run time is that of one pass, as before.
+    """
+    run = jax.jit(run)  # traced once: eval_shape's trace is reused by the cond below
+    shapes = jax.eval_shape(run, valid)
+    zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+
+    def body(carry, first):
+        sums, ok = carry
+        need = first | ~jnp.all(ok | ~valid)
+        use = jnp.where(first, valid, valid & ok)
+        new_sums, new_ok = jax.lax.cond(need, run, lambda u: (sums, ok), use)
+        return (new_sums, jnp.where(first, new_ok, ok)), None
+
+    (sums, ok), _ = jax.lax.scan(body, zeros, jnp.array([True, False]))
+    return sums, ok

@@ -16,6 +16,8 @@ import numpy as np
 from jaxtyping import Array, Float, UInt32
 
 from .._export import Exportable
+from ..filters import InteractingMultipleModel
+from ..models import TrackingModel
 from ._metrics import chi2_mean_bounds
 
 
@@ -299,3 +301,26 @@ def _key_fields(key) -> dict:
     if jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key):
         return {"key": jax.random.key_data(key), "key_impl": str(jax.random.key_impl(key))}
     return {"key": jnp.asarray(key), "key_impl": str(jax.config.jax_default_prng_impl)}
+
+
+def _model_name(model) -> str:
+    """A model's class name; a TrackingModel's with its transition and measurement classes, which
+    say what the filter assumed (``TrackingModel(CoordinatedTurn, RangeBearing)``: a known turn)."""
+    name = type(model).__name__
+    if isinstance(model, TrackingModel):
+        name += f"({type(model.transition_model).__name__}, {type(model.measurement_model).__name__})"
+    return name
+
+
+def _estimator_fields(filter, filter_model, given: bool) -> dict:
+    """The estimator fields of a :class:`MonteCarloResult`, from the resolved ``filter`` (the
+    default KalmanFilter filled in) and ``filter_model`` (the truth when none was given; None for
+    an IMM). ``given``: whether the caller passed a ``filter_model``: when not, the filter ran the
+    truth's own model, which the result must say (issue 37)."""
+    if isinstance(filter, InteractingMultipleModel):
+        members = ", ".join(type(f).__name__ for f in filter.filters)
+        return {"filter_name": f"{type(filter).__name__}({members})",
+                "filter_model_name": ", ".join(_model_name(m) for m in filter.models),
+                "filter_model_source": "imm"}
+    return {"filter_name": type(filter).__name__, "filter_model_name": _model_name(filter_model),
+            "filter_model_source": "given" if given else "truth"}

@@ -50,11 +50,11 @@ from ..filters._batch import (
     shared_covariances,
 )
 from ..filters._linalg import all_rows, cholesky_and_inverse, marginal_cov, matmul, sum_rows, take_components
-from ..models import AbstractStateSpaceModel, TrackingModel
+from ..models import AbstractStateSpaceModel
 from ._metrics import normalized_squared_error
-from ._result import MonteCarloResult, _key_fields, _Sums, _summarize, _zero_sums
+from ._result import MonteCarloResult, _estimator_fields, _key_fields, _Sums, _summarize, _zero_sums
 from ._noise import key_words, step_normals
-from ._engine import block_size_for, check_mesh, refuse_traced, run_blocks
+from ._engine import block_size_for, check_mesh, refuse_traced, run_blocks, run_excluding_failures
 from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
 from ._simulate import (
     _resolve_num_steps,
@@ -300,31 +300,6 @@ class _Models(eqx.Module):
     setup: Any = None
 
 
-def _run_excluding_failures(run, valid):
-    """``run(valid)``; if a valid run failed, ``run(valid & ok)`` again (same draws) without it.
-
-    Returns ``(per-step sums, ok per run of the first pass)``. The two passes are one
-    ``lax.scan`` of length 2 over a ``lax.cond`` whose other branch passes the first pass's
-    sums on, not a ``cond`` between the first pass and a second copy of it: the block's program
-    (its filter step, and under ``grad`` its transpose) is in the compiled program once, not
-    twice, which halves its compile time. In the usual case (nothing failed) the second
-    iteration takes the cheap branch, so the run time is that of one pass, as before.
-    """
-    run = jax.jit(run)  # traced once: eval_shape's trace is reused by the cond below
-    shapes = jax.eval_shape(run, valid)
-    zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
-
-    def body(carry, first):
-        sums, ok = carry
-        need = first | ~jnp.all(ok | ~valid)
-        use = jnp.where(first, valid, valid & ok)
-        new_sums, new_ok = jax.lax.cond(need, run, lambda u: (sums, ok), use)
-        return (new_sums, jnp.where(first, new_ok, ok)), None
-
-    (sums, ok), _ = jax.lax.scan(body, zeros, jnp.array([True, False]))
-    return sums, ok
-
-
 def _block_delta(common: _Common, models: _Models, key, start, valid) -> _Sums:
     """The sums of one block of runs ``start … start+block−1`` (those where ``valid``).
 
@@ -347,7 +322,7 @@ def _block_delta(common: _Common, models: _Models, key, start, valid) -> _Sums:
         factors, cov, maps, nees_factor = setup
         run = lambda use: _shared_block(  # noqa: E731
             truth, factors, filter_model, cov, maps, nees_factor, observed, first_step, components, key, start, use)
-    step_sums, ok = _run_excluding_failures(run, valid)
+    step_sums, ok = run_excluding_failures(run, valid)
     use = valid & ok
     w = use.astype(step_sums.nees.dtype)
     # NIS degrees of freedom of the runs that count: integers, summed exactly in any order.
@@ -387,29 +362,6 @@ def _check_components(name, components, dim):
     if not out or len(set(out)) != len(out) or min(out) < 0 or max(out) >= dim:
         raise InputError(f"`{name}` must hold distinct state indices in [0, {dim}); got {out}.")
     return out
-
-
-def _model_name(model) -> str:
-    """A model's class name; a TrackingModel's with its transition and measurement classes, which
-    say what the filter assumed (``TrackingModel(CoordinatedTurn, RangeBearing)``: a known turn)."""
-    name = type(model).__name__
-    if isinstance(model, TrackingModel):
-        name += f"({type(model.transition_model).__name__}, {type(model.measurement_model).__name__})"
-    return name
-
-
-def _estimator_fields(filter, filter_model, given: bool) -> dict:
-    """The estimator fields of a :class:`MonteCarloResult`, from the resolved ``filter`` (the
-    default KalmanFilter filled in) and ``filter_model`` (the truth when none was given; None for
-    an IMM). ``given``: whether the caller passed a ``filter_model``: when not, the filter ran the
-    truth's own model, which the result must say (issue 37)."""
-    if isinstance(filter, InteractingMultipleModel):
-        members = ", ".join(type(f).__name__ for f in filter.filters)
-        return {"filter_name": f"{type(filter).__name__}({members})",
-                "filter_model_name": ", ".join(_model_name(m) for m in filter.models),
-                "filter_model_source": "imm"}
-    return {"filter_name": type(filter).__name__, "filter_model_name": _model_name(filter_model),
-            "filter_model_source": "given" if given else "truth"}
 
 
 def _prepare_models(truth, filter, filter_model, truth_components, filter_components):
