@@ -1,0 +1,49 @@
+"""Data association: gating, likelihood-ratio matrices, assignment, PDA/JPDA marginals.
+
+Pure functions of arrays for ONE scan (batches come from ``jax.vmap``); no track table here
+(trackers live in :mod:`jaxtrack.multitarget`). Every method takes the same log-weight matrix
+``L`` ``(T, 1 + M)`` (column 0: missed detection; ``−inf`` outside the gate) and returns the same
+:class:`Association` (marginal association probabilities), so a tracker takes the method as a
+strategy object:
+
+- ``_types``: :class:`Association`, :class:`AbstractAssociator` (the input and output conventions);
+- ``_gating``: :func:`gate_threshold` (χ² gates), :func:`measurement_likelihoods` (any filter's
+  update on every measurement of a scan), :func:`log_likelihood_ratios` (the matrix ``L``);
+- ``_assignment``: :func:`linear_assignment` (2-D assignment) and :class:`GNN`;
+- ``_jpda``: :class:`PDA`, :class:`JPDA` (exact marginals), :class:`LoopyBP` (belief propagation);
+- ``_pda_update``: :func:`pda_update`, the PDA/JPDA mixture collapse of the conditioned moments.
+"""
+
+from ._types import (
+    AbstractAssociator as AbstractAssociator,
+    Association as Association,
+)
+from ._gating import (
+    gate_threshold as gate_threshold,
+    log_likelihood_ratios as log_likelihood_ratios,
+    measurement_likelihoods as measurement_likelihoods,
+)
+from ._assignment import (
+    GNN as GNN,
+    linear_assignment as linear_assignment,
+)
+from ._jpda import (
+    JPDA as JPDA,
+    PDA as PDA,
+    LoopyBP as LoopyBP,
+)
+from ._pda_update import pda_update as pda_update
+
+__all__ = [
+    "AbstractAssociator",
+    "Association",
+    "gate_threshold",
+    "log_likelihood_ratios",
+    "measurement_likelihoods",
+    "GNN",
+    "linear_assignment",
+    "JPDA",
+    "PDA",
+    "LoopyBP",
+    "pda_update",
+]
