@@ -2,6 +2,7 @@
 on one device or sharded over devices and hosts."""
 
 from ._cep import circular_error_probable as circular_error_probable
+from ._ospa import GOSPA as GOSPA, OSPA as OSPA, gospa as gospa, ospa as ospa
 from ._engine import monte_carlo_map as monte_carlo_map
 from ._differentiable import differentiable_monte_carlo as differentiable_monte_carlo
 from ._metrics import (
@@ -26,6 +27,10 @@ from ._simulate import (
 
 __all__ = [
     "circular_error_probable",
+    "GOSPA",
+    "OSPA",
+    "gospa",
+    "ospa",
     "monte_carlo_map",
     "Interval",
     "chi2_mean_bounds",
