@@ -19,7 +19,10 @@ _request_x64()
 
 __version__ = "0.1.0"
 
-_SUBPACKAGES = ("filters", "models", "montecarlo", "covariance", "sensitivity", "learning", "bounds")
+_SUBPACKAGES = (
+    "filters", "models", "montecarlo", "covariance", "sensitivity", "learning", "bounds",
+    "association", "multitarget",
+)
 __all__ = [*_SUBPACKAGES, "InputError", "__version__"]
 
 

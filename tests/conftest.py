@@ -60,6 +60,10 @@ TYPECHECKED = [
     "jaxtrack.applications.ho_sensitivity",
     "jaxtrack.learning._params",
     "jaxtrack.learning._mle",
+    "jaxtrack.association._jpda",
+    "jaxtrack.association._pda_update",
+    "jaxtrack.association._clusters",
+    "jaxtrack.association._assignment",
 ]
 if os.environ.get("JAXTRACK_TYPECHECK", "1") != "0":
     with install_import_hook(TYPECHECKED, "beartype.beartype"):

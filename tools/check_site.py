@@ -34,6 +34,8 @@ PUBLIC_MODULES = (
     "learning",
     "bounds",
     "plotting",
+    "association",
+    "multitarget",
 )
 # Names of the top-level ``jaxtrack.__all__`` that are documented objects (the rest are the
 # subpackages themselves and ``__version__``), with the path they are documented at:

@@ -1,0 +1,56 @@
+"""Multi-target tracking: scenarios with births, deaths, detection probability and Poisson clutter;
+the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step and one scan.
+
+- ``_scenario``: :class:`Scenario`, :func:`simulate_scenario` / :func:`simulate_scenarios` (padded
+  scans with validity masks and the origin of every measurement);
+- ``_tracker``: :class:`TrackTable`, :class:`Tracker` (association method as a strategy),
+  :func:`run_tracker`.
+"""
+
+from ._scenario import (
+    CLUTTER as CLUTTER,
+    PADDING as PADDING,
+    CapacityWarning as CapacityWarning,
+    MultiTargetTrajectory as MultiTargetTrajectory,
+    Scan as Scan,
+    Scenario as Scenario,
+    crossing_targets as crossing_targets,
+    simulate_scenario as simulate_scenario,
+    simulate_scenarios as simulate_scenarios,
+)
+from ._tracker import (
+    CONFIRMED as CONFIRMED,
+    EMPTY as EMPTY,
+    TENTATIVE as TENTATIVE,
+    IntegratedExistence as IntegratedExistence,
+    OnePointInitiator as OnePointInitiator,
+    Tracker as Tracker,
+    TrackerResult as TrackerResult,
+    TrackerStepInfo as TrackerStepInfo,
+    TrackManagement as TrackManagement,
+    TrackTable as TrackTable,
+    run_tracker as run_tracker,
+)
+
+__all__ = [
+    "CLUTTER",
+    "PADDING",
+    "CapacityWarning",
+    "MultiTargetTrajectory",
+    "Scan",
+    "Scenario",
+    "crossing_targets",
+    "simulate_scenario",
+    "simulate_scenarios",
+    "CONFIRMED",
+    "EMPTY",
+    "TENTATIVE",
+    "IntegratedExistence",
+    "OnePointInitiator",
+    "Tracker",
+    "TrackerResult",
+    "TrackerStepInfo",
+    "TrackManagement",
+    "TrackTable",
+    "run_tracker",
+]

@@ -1,0 +1,535 @@
+"""Multi-target trackers (GNN, JPDA, JIPDA) as one step function over a fixed-capacity track table.
+
+A tracker step is ``(table, scan) → (table, info)`` (``../DESIGN``: "trackers know nothing of
+scenarios"), in the order of Stone Soup's ``MultiTargetMixtureTracker.__next__``:
+
+1. **predict** every live track with the filter's own ``predict``;
+2. **hypothesise**: each track's update on every measurement of the scan (the filter's own
+   ``update``, vmapped), giving the Gaussian log-likelihoods, the NIS for the χ² gate and the
+   conditioned moments (:func:`jaxtrack.association.measurement_likelihoods`);
+3. **associate**: the log-likelihood-ratio matrix (:func:`jaxtrack.association.log_likelihood_ratios`)
+   through the ``association=`` strategy (GNN, PDA, exact JPDA, loopy BP), which returns the
+   marginal association probabilities ``β``;
+4. **update**: the PDA/JPDA mixture collapse of the conditioned moments with ``β``
+   (:func:`jaxtrack.association.pda_update`; with GNN's one-hot rows it is the plain update);
+   with integrated existence (JIPDA) also the existence probability;
+5. **manage**: M-of-N confirmation, deletion after consecutive misses (or low existence);
+6. **initiate**: a tentative track at every measurement no track claimed, in free slots.
+
+What "a track claimed measurement j" and "a track was hit" mean follows Stone Soup: a
+detection hypothesis counts when its probability exceeds the track's missed-detection
+probability (``β[t, j] > β[t, 0]``); with GNN's one-hot rows that is "assigned".
+
+Every array has a static shape: ``capacity`` tracks, the scan's ``max_measurements``. When more
+measurements would start tracks than there are free slots, the births that do not fit are
+counted in ``TrackTable.num_dropped_births`` (and flagged by ``overflow``), never dropped in silence;
+:func:`run_tracker` warns on the host.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from .._validation import InputError, is_concrete
+from ..association._gating import gate_threshold, log_likelihood_ratios, measurement_likelihoods
+from ..association._pda_update import pda_update
+from ..association._types import AbstractAssociator, Association
+from ..filters._base import AbstractFilter
+from ..models._base import AbstractStateSpaceModel
+from ._scenario import CapacityWarning
+
+EMPTY = 0
+"""Track status of a free slot in :attr:`TrackTable.status` (a deleted track's slot becomes it)."""
+TENTATIVE = 1
+"""Track status of a track not confirmed yet (M-of-N logic, :class:`TrackManagement`)."""
+CONFIRMED = 2
+"""Track status of a confirmed track."""
+
+
+class TrackTable(eqx.Module):
+    """The tracker's state: a fixed-capacity table of tentative and confirmed tracks.
+
+    **Fields** (``N`` = capacity, ``n`` = state dimension):
+
+    - ``mean`` ``(N, n)``, ``cov`` ``(N, n, n)``: each slot's filtered moments after the last
+      scan (an empty slot holds zeros and the identity, so nothing non-finite is ever computed).
+    - ``status`` ``(N,)`` int: :data:`EMPTY`, :data:`TENTATIVE` or :data:`CONFIRMED`.
+    - ``existence`` ``(N,)``: the probability that the track is a target (JIPDA; 1 otherwise).
+    - ``hits`` ``(N,)`` int: a bit mask of the last scans the track was hit in (bit 0 = the last
+      scan), for M-of-N confirmation; ``misses`` ``(N,)`` int: scans since the last hit.
+    - ``track_id`` ``(N,)`` int: a unique id per track (−1 in empty slots); ``born_at`` ``(N,)``
+      int: the scan index of its first measurement.
+    - ``next_id`` ``()`` int: the next id to give; ``step`` ``()`` int: the next scan's index.
+    - ``num_dropped_births`` ``()`` int: births refused so far for want of a free slot.
+    """
+
+    mean: Float[Array, "N n"]
+    cov: Float[Array, "N n n"]
+    status: Int[Array, " N"]
+    existence: Float[Array, " N"]
+    hits: Int[Array, " N"]
+    misses: Int[Array, " N"]
+    track_id: Int[Array, " N"]
+    born_at: Int[Array, " N"]
+    next_id: Int[Array, ""]
+    step: Int[Array, ""]
+    num_dropped_births: Int[Array, ""]
+
+    @property
+    def live(self) -> Bool[Array, " N"]:
+        """True in slots holding a track (tentative or confirmed)."""
+        return self.status != EMPTY
+
+    @property
+    def confirmed(self) -> Bool[Array, " N"]:
+        """True in slots holding a confirmed track."""
+        return self.status == CONFIRMED
+
+    @property
+    def overflow(self) -> Bool[Array, ""]:
+        """True once a birth was refused for want of a free slot."""
+        return self.num_dropped_births > 0
+
+
+class OnePointInitiator(eqx.Module):
+    """Start a track at one measurement: the filter's update of a broad prior on it.
+
+    The new track's moments are the update of ``N(prior_mean, prior_cov)`` on the measurement
+    with the tracker's filter (Stone Soup's ``SinglePointInitiator``): with a position sensor and a
+    prior broad in position, the position is the measurement and the velocity keeps the prior
+    (the "one-point initiation with a velocity prior" of Bar-Shalom, Willett & Tian 2011, §3.2).
+    For a nonlinear sensor pass an iterated filter as ``filter`` (a single EKF step linearised at a
+    far-away prior mean is poor).
+
+    **Arguments:**
+
+    - ``prior_mean`` ``(n,)``, ``prior_cov`` ``(n, n)``: the prior of a new target, in the state's
+      units.
+    - ``filter``: the filter whose update initiates (default None: the tracker's filter).
+    - ``existence``: the initial existence probability of a new track (JIPDA; default 0.5).
+    """
+
+    prior_mean: Float[Array, " n"]
+    prior_cov: Float[Array, "n n"]
+    filter: AbstractFilter | None = None
+    existence: Float[Array, ""] = eqx.field(default_factory=lambda: jnp.asarray(0.5))
+
+    def __init__(self, prior_mean, prior_cov, filter=None, existence=0.5):
+        self.prior_mean = jnp.asarray(prior_mean, float)
+        self.prior_cov = jnp.asarray(prior_cov, float)
+        n = self.prior_mean.shape[-1] if self.prior_mean.ndim else 0
+        if self.prior_mean.ndim != 1 or self.prior_cov.shape != (n, n):
+            raise InputError(
+                f"`prior_mean` must be (n,) and `prior_cov` (n, n); got {self.prior_mean.shape} "
+                f"and {self.prior_cov.shape}."
+            )
+        self.filter = filter
+        self.existence = jnp.asarray(existence, float)
+        if is_concrete(self.existence) and not 0.0 < float(self.existence) <= 1.0:
+            raise InputError(f"`existence` must lie in (0, 1]; got {float(self.existence)}.")
+
+
+class TrackManagement(eqx.Module):
+    """When a track is confirmed and when it is deleted (M-of-N logic; existence thresholds).
+
+    A tentative track is confirmed once it was hit in ``confirm_hits`` of the last
+    ``confirm_window`` scans (its first measurement counts; M-of-N, Blackman & Popoli 1999
+    §6.3). A tentative track that can no longer reach that count within its first
+    ``confirm_window`` scans is deleted; a confirmed one after ``delete_after_misses`` scans in a
+    row without a hit (Stone Soup's ``UpdateTimeStepsDeleter(time_steps_since_update=...)``).
+    With integrated existence (JIPDA), a track is also confirmed when its existence reaches
+    ``confirm_existence`` and deleted when it falls below ``delete_existence``.
+
+    ``confirm_hits = confirm_window = 1`` confirms every new track at once (as Stone Soup's
+    single-point initiator does).
+    """
+
+    confirm_hits: int = eqx.field(static=True, default=2)
+    confirm_window: int = eqx.field(static=True, default=3)
+    delete_after_misses: int = eqx.field(static=True, default=3)
+    confirm_existence: float | None = eqx.field(static=True, default=None)
+    delete_existence: float | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        if not 1 <= self.confirm_hits <= self.confirm_window <= 30:
+            raise InputError(
+                "`confirm_hits` (M) and `confirm_window` (N) of M-of-N confirmation need "
+                f"1 <= M <= N <= 30; got M={self.confirm_hits}, N={self.confirm_window}."
+            )
+        if self.delete_after_misses < 1:
+            raise InputError(
+                f"`delete_after_misses` must be at least 1; got {self.delete_after_misses}."
+            )
+        for name in ("confirm_existence", "delete_existence"):
+            value = getattr(self, name)
+            if value is not None and not 0.0 <= value <= 1.0:
+                raise InputError(f"`{name}` must lie in [0, 1]; got {value}.")
+
+
+class IntegratedExistence(eqx.Module):
+    """JIPDA's existence probability (Mušicki & Evans 2004, "Joint integrated probabilistic data
+    association: JIPDA", IEEE TAES 40(3)): Markov chain 1, ``r_{k|k-1} = P_S r_{k-1|k-1}``.
+
+    **Arguments:** ``prob_survival``: ``P_S``, the probability a target persists from one scan to
+    the next (dimensionless, in (0, 1]).
+    """
+
+    prob_survival: Float[Array, ""]
+
+    def __init__(self, prob_survival=0.99):
+        self.prob_survival = jnp.asarray(prob_survival, float)
+        if is_concrete(self.prob_survival) and not 0.0 < float(self.prob_survival) <= 1.0:
+            raise InputError(f"`prob_survival` must lie in (0, 1]; got {float(self.prob_survival)}.")
+
+
+class TrackerStepInfo(NamedTuple):
+    """What one tracker step computed besides the new table.
+
+    ``association``: the scan's :class:`~jaxtrack.association.Association` (rows = table slots);
+    ``log_weights``: the ``(N, 1 + M)`` matrix it was computed from; ``hit`` ``(N,)``: tracks hit
+    in this scan; ``claimed`` ``(M,)``: measurements some track claimed; ``born`` ``(M,)``:
+    measurements that started a track; ``births_dropped`` ``()``: births refused in this scan.
+    """
+
+    association: Association
+    log_weights: Float[Array, "N Mp1"]
+    hit: Bool[Array, " N"]
+    claimed: Bool[Array, " M"]
+    born: Bool[Array, " M"]
+    births_dropped: Int[Array, ""]
+
+
+class Tracker(eqx.Module):
+    """A multi-target tracker: one step function over a :class:`TrackTable`.
+
+    The association method is a strategy: ``GNN()`` gives the GNN tracker, ``JPDA()`` the JPDA
+    tracker, ``JPDA()`` with ``existence=IntegratedExistence(...)`` the JIPDA tracker,
+    ``LoopyBP(...)`` the JPDA tracker with belief-propagation marginals for large clusters.
+
+    **Arguments:**
+
+    - ``filter``: any jaxtrack :class:`~jaxtrack.filters.AbstractFilter` (KF, EKF, UKF, …) and
+      ``model``: the state-space model every target follows (its ``measurement`` is the sensor).
+    - ``association``: an :class:`~jaxtrack.association.AbstractAssociator`.
+    - ``initiator``: a :class:`OnePointInitiator`; ``management``: a :class:`TrackManagement`.
+    - ``prob_detect``: ``P_D``; ``clutter_density``: ``λ``, clutter points per unit
+      measurement-space volume per scan; ``prob_gate``: ``P_G`` of the χ² gate (1: no gate).
+      ``P_D`` and ``λ`` are array leaves (differentiable).
+    - ``capacity``: the number of track slots ``N`` (static).
+    - ``existence``: None, or :class:`IntegratedExistence` for JIPDA.
+    """
+
+    filter: AbstractFilter
+    model: AbstractStateSpaceModel
+    association: AbstractAssociator
+    initiator: OnePointInitiator
+    management: TrackManagement
+    prob_detect: Float[Array, ""]
+    clutter_density: Float[Array, ""]
+    prob_gate: float = eqx.field(static=True)
+    gate: float = eqx.field(static=True)
+    capacity: int = eqx.field(static=True)
+    existence: IntegratedExistence | None
+
+    def __init__(
+        self,
+        filter: AbstractFilter,
+        model: AbstractStateSpaceModel,
+        association: AbstractAssociator,
+        initiator: OnePointInitiator,
+        *,
+        prob_detect: ArrayLike,
+        clutter_density: ArrayLike,
+        prob_gate: float = 1.0,
+        capacity: int,
+        management: TrackManagement | None = None,
+        existence: IntegratedExistence | None = None,
+    ):
+        if not isinstance(filter, AbstractFilter):
+            raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
+        if not isinstance(association, AbstractAssociator):
+            raise InputError(
+                "`association` must be a jaxtrack.association method (GNN(), PDA(), JPDA(), "
+                f"LoopyBP(...)); got {type(association).__name__}."
+            )
+        if not isinstance(initiator, OnePointInitiator):
+            raise InputError(f"`initiator` must be a OnePointInitiator; got {type(initiator).__name__}.")
+        if initiator.prior_mean.shape != (model.state_dim,):
+            raise InputError(
+                f"`initiator.prior_mean` has {initiator.prior_mean.shape[0]} states; the model has "
+                f"{model.state_dim}."
+            )
+        if not isinstance(capacity, int | np.integer) or capacity < 1:
+            raise InputError(f"`capacity` must be a positive int (track slots); got {capacity!r}.")
+        self.filter = filter
+        self.model = model
+        self.association = association
+        self.initiator = initiator
+        self.management = TrackManagement() if management is None else management
+        self.prob_detect = jnp.asarray(prob_detect, float)
+        self.clutter_density = jnp.asarray(clutter_density, float)
+        if is_concrete(self.prob_detect) and not 0.0 < float(self.prob_detect) <= 1.0:
+            raise InputError(f"`prob_detect` must lie in (0, 1]; got {float(self.prob_detect)}.")
+        if is_concrete(self.clutter_density) and not float(self.clutter_density) > 0.0:
+            raise InputError(
+                f"`clutter_density` must be positive (per unit measurement volume); got "
+                f"{float(self.clutter_density)}."
+            )
+        self.prob_gate = float(prob_gate)
+        self.gate = float(gate_threshold(self.prob_gate, model.meas_dim))
+        self.capacity = int(capacity)
+        self.existence = existence
+
+    def init(self) -> TrackTable:
+        """The empty table before the first scan."""
+        N, n = self.capacity, self.model.state_dim
+        dtype = self.initiator.prior_cov.dtype
+        zeros_i = jnp.zeros((N,), jnp.int32)
+        return TrackTable(
+            mean=jnp.zeros((N, n), dtype),
+            cov=jnp.broadcast_to(jnp.eye(n, dtype=dtype), (N, n, n)),
+            status=zeros_i,
+            existence=jnp.zeros((N,), dtype),
+            hits=zeros_i,
+            misses=zeros_i,
+            track_id=jnp.full((N,), -1, jnp.int32),
+            born_at=jnp.full((N,), -1, jnp.int32),
+            next_id=jnp.zeros((), jnp.int32),
+            step=jnp.zeros((), jnp.int32),
+            num_dropped_births=jnp.zeros((), jnp.int32),
+        )
+
+    def step(
+        self, table: TrackTable, measurements: Float[Array, "M m"], valid: Bool[Array, " M"]
+    ) -> tuple[TrackTable, TrackerStepInfo]:
+        """One scan: predict, hypothesise, associate, update, manage, initiate.
+
+        **Arguments:**
+
+        - ``table``: the :class:`TrackTable` after the previous scan (``init()`` before the first).
+        - ``measurements``: the scan, ``(M, m)`` in the sensor's units (padded rows may hold NaN);
+          ``valid``: boolean ``(M,)``, False for padding.
+
+        **Returns:** ``(new_table, TrackerStepInfo)``.
+        """
+        k = table.step
+        live = table.live
+        dtype = table.mean.dtype
+        measurements = jnp.asarray(measurements, dtype)
+        valid = jnp.asarray(valid, bool)
+
+        # 1. Predict (a track born in the previous scan sits at that scan: predicted like the rest).
+        # Empty slots hold (0, I), so their prediction is finite and then discarded.
+        pred_mean, pred_cov = jax.vmap(lambda x, P: self.filter.predict(self.model, x, P, k))(
+            table.mean, table.cov
+        )
+        existence_pred = table.existence
+        if self.existence is not None:
+            existence_pred = self.existence.prob_survival * table.existence
+
+        # 2.-3. Hypothesise and associate.
+        loglik, nis, conditioned = jax.vmap(
+            lambda x, P: measurement_likelihoods(self.filter, self.model, x, P, measurements, valid, k)
+        )(pred_mean, pred_cov)
+        log_weights, _ = log_likelihood_ratios(
+            loglik,
+            nis,
+            live,
+            valid,
+            prob_detect=self.prob_detect,
+            clutter_density=self.clutter_density,
+            gate_threshold=self.gate,
+            prob_gate=self.prob_gate,
+            existence=existence_pred if self.existence is not None else None,
+        )
+        association = self.association(log_weights, live)
+        beta = association.association_probabilities
+
+        # 4. Update. With existence, beta[t, 0] mixes "exists, not detected" and "does not exist";
+        # the state is conditioned on existence (Mušicki & Evans 2004, eqs. (27)-(31)).
+        if self.existence is not None:
+            pdpg = self.prob_detect * self.prob_gate
+            undetected = existence_pred * (1.0 - pdpg) / (1.0 - existence_pred * pdpg)
+            exist_post = beta[:, 0] * undetected + jnp.sum(beta[:, 1:], axis=1)
+            safe = jnp.where(exist_post > 0, exist_post, 1.0)
+            weights = jnp.concatenate([(beta[:, :1] * undetected[:, None]), beta[:, 1:]], axis=1)
+            weights = weights / safe[:, None]
+        else:
+            exist_post = jnp.where(live, 1.0, 0.0).astype(dtype)
+            weights = beta
+        post_mean, post_cov = jax.vmap(pda_update)(conditioned, weights, pred_mean, pred_cov)
+
+        # 5. Manage. A hit: some detection more probable than the miss (Stone Soup's rule).
+        hit = live & jnp.any(beta[:, 1:] > beta[:, :1], axis=1)
+        claimed = jnp.any(live[:, None] & (beta[:, 1:] > beta[:, :1]), axis=0) & valid
+        mgmt = self.management
+        window_mask = (1 << mgmt.confirm_window) - 1
+        hits = ((table.hits << 1) | hit.astype(jnp.int32)) & window_mask
+        misses = jnp.where(hit, 0, table.misses + 1)
+        num_hits = _popcount(hits, mgmt.confirm_window)
+        age = k - table.born_at + 1  # scans seen, this one included
+        tentative = table.status == TENTATIVE
+        confirm = tentative & (num_hits >= mgmt.confirm_hits)
+        if mgmt.confirm_existence is not None:
+            confirm = confirm | (tentative & (exist_post >= mgmt.confirm_existence))
+        # A tentative track that cannot reach M hits within its first N scans is deleted.
+        hopeless = tentative & ~confirm & (num_hits + (mgmt.confirm_window - age) < mgmt.confirm_hits)
+        delete = live & ((misses >= mgmt.delete_after_misses) | hopeless)
+        if mgmt.delete_existence is not None:
+            delete = delete | (live & (exist_post < mgmt.delete_existence))
+        status = jnp.where(confirm, CONFIRMED, table.status)
+        status = jnp.where(delete, EMPTY, status)
+        keep = status != EMPTY
+        mean = jnp.where(keep[:, None], post_mean, 0.0)
+        cov = jnp.where(keep[:, None, None], post_cov, jnp.eye(post_cov.shape[-1], dtype=dtype))
+
+        # 6. Initiate at the unclaimed measurements, in free slots (ranks by cumulative sums).
+        born_state = jax.vmap(lambda z: self._initiate(z, k))(measurements)
+        new = valid & ~claimed
+        free = ~keep
+        N, M = self.capacity, measurements.shape[0]
+        free_slots = jnp.nonzero(free, size=N, fill_value=N)[0]  # free slot indices, ascending
+        new_meas = jnp.nonzero(new, size=M, fill_value=M)[0]  # new measurements, ascending
+        num_new = jnp.sum(new)
+        num_born = jnp.minimum(num_new, jnp.sum(free))
+        # Slot free_slots[q] receives measurement new_meas[q] for q < num_born.
+        q = jnp.arange(N)
+        meas_of_q = jnp.where(q < num_born, new_meas[jnp.minimum(q, M - 1)], M).astype(jnp.int32)
+        slot_meas = jnp.full((N + 1,), M, jnp.int32).at[free_slots].set(meas_of_q)[:N]
+        births = slot_meas < M
+        take = jnp.minimum(slot_meas, M - 1)
+        slot_rank = jnp.cumsum(births) - 1
+        b_mean, b_cov = born_state
+        mean = jnp.where(births[:, None], b_mean[take], mean)
+        cov = jnp.where(births[:, None, None], b_cov[take], cov)
+        first_status = CONFIRMED if mgmt.confirm_hits == 1 else TENTATIVE
+        status = jnp.where(births, first_status, status)
+        existence = jnp.where(keep, exist_post, 0.0)
+        existence = jnp.where(births, self.initiator.existence.astype(dtype), existence)
+        hits = jnp.where(births, 1, jnp.where(keep, hits, 0))
+        misses = jnp.where(births | ~keep, 0, misses)
+        track_id = jnp.where(births, table.next_id + slot_rank, jnp.where(keep, table.track_id, -1))
+        born_at = jnp.where(births, k, jnp.where(keep, table.born_at, -1))
+        born = jnp.zeros((M + 1,), bool).at[slot_meas].set(births, mode="drop")[:M]
+        dropped = num_new - num_born
+        new_table = TrackTable(
+            mean=mean,
+            cov=cov,
+            status=status.astype(jnp.int32),
+            existence=existence,
+            hits=hits.astype(jnp.int32),
+            misses=misses.astype(jnp.int32),
+            track_id=track_id.astype(jnp.int32),
+            born_at=born_at.astype(jnp.int32),
+            next_id=table.next_id + num_born.astype(jnp.int32),
+            step=k + 1,
+            num_dropped_births=table.num_dropped_births + dropped.astype(jnp.int32),
+        )
+        info = TrackerStepInfo(association, log_weights, hit, claimed, born, dropped.astype(jnp.int32))
+        return new_table, info
+
+    def _initiate(self, z, k):
+        init_filter = self.filter if self.initiator.filter is None else self.initiator.filter
+        z = jnp.where(jnp.isfinite(z), z, 0.0)  # padded rows: never used, kept finite
+        post = init_filter.update(
+            self.model, self.initiator.prior_mean, self.initiator.prior_cov, z,
+            jnp.ones(z.shape, bool), k,
+        )
+        return post.mean, post.cov
+
+
+def _popcount(bits: Array, width: int) -> Array:
+    """The number of set bits among the low ``width`` bits of an int array."""
+    return sum((bits >> i) & 1 for i in range(width))
+
+
+class TrackerResult(eqx.Module):
+    """A tracker run over ``T`` scans: the table after each scan, and the last table.
+
+    **Fields:** ``mean`` ``(T, N, n)``, ``cov`` ``(T, N, n, n)`` (None unless
+    ``save_cov=True``), ``status`` ``(T, N)``, ``existence`` ``(T, N)``, ``track_id`` ``(T, N)``:
+    the table's fields after scan ``k``; ``association_probabilities`` ``(T, N, 1 + M)``;
+    ``final``: the last :class:`TrackTable`; ``overflow`` ``()``: a birth was refused.
+    """
+
+    mean: Float[Array, "T N n"]
+    cov: Float[Array, "T N n n"] | None
+    status: Int[Array, "T N"]
+    existence: Float[Array, "T N"]
+    track_id: Int[Array, "T N"]
+    association_probabilities: Float[Array, "T N Mp1"]
+    final: TrackTable
+    overflow: Bool[Array, ""]
+
+
+@eqx.filter_jit
+def _run_tracker(tracker, measurements, valid, save_cov):
+    def body(table, scan):
+        table, info = tracker.step(table, *scan)
+        out = (
+            table.mean,
+            table.cov if save_cov else None,
+            table.status,
+            table.existence,
+            table.track_id,
+            info.association.association_probabilities,
+        )
+        return table, out
+
+    final, (mean, cov, status, existence, track_id, beta) = jax.lax.scan(
+        body, tracker.init(), (measurements, valid)
+    )
+    return TrackerResult(mean, cov, status, existence, track_id, beta, final, final.overflow)
+
+
+def run_tracker(
+    tracker: Tracker,
+    measurements: ArrayLike,
+    valid: ArrayLike,
+    *,
+    save_cov: bool = False,
+    warn: bool = True,
+) -> TrackerResult:
+    """Run a tracker over ``T`` scans: one jitted ``lax.scan`` of :meth:`Tracker.step`.
+
+    **Arguments:**
+
+    - ``tracker``: the :class:`Tracker`.
+    - ``measurements``: ``(T, M, m)`` padded scans in the sensor's units (padding may be NaN);
+      ``valid``: boolean ``(T, M)``, False for padding. A scenario's
+      ``trajectory.scans.measurements`` and ``.valid`` are in this form.
+    - ``save_cov``: also keep every scan's covariances (``(T, N, n, n)``).
+    - ``warn``: warn (:class:`CapacityWarning`) on the host when births were refused for want of
+      track slots (concrete results only).
+
+    **Returns:** a :class:`TrackerResult`. Under ``jax.vmap`` over runs it batches like any
+    filter run.
+    """
+    measurements = jnp.asarray(measurements)
+    valid = jnp.asarray(valid, bool)
+    if measurements.ndim != 3 or valid.shape != measurements.shape[:2]:
+        raise InputError(
+            "`measurements` must be (T, M, m) and `valid` (T, M); got "
+            f"{measurements.shape} and {valid.shape}."
+        )
+    if measurements.shape[-1] != tracker.model.meas_dim:
+        raise InputError(
+            f"`measurements` have {measurements.shape[-1]} components; the tracker's model "
+            f"measures {tracker.model.meas_dim}."
+        )
+    result = _run_tracker(tracker, measurements, valid, save_cov)
+    if warn and is_concrete(result.overflow) and bool(result.overflow):
+        warnings.warn(
+            f"the track table's capacity ({tracker.capacity} slots) was too small: "
+            f"{int(result.final.num_dropped_births)} track births were refused; raise `capacity`.",
+            CapacityWarning,
+            stacklevel=2,
+        )
+    return result
