@@ -154,18 +154,29 @@ def test_jpda_clusters_a_large_scan_exactly():
     L = jnp.asarray(np.stack([_clustered_problem(rng) for _ in range(BATCH)]))  # (50, 12, 13)
     valid = jnp.asarray(rng.uniform(size=(BATCH, 12)) < 0.9)
     dense = _numpy(jax.jit(jax.vmap(JPDA(max_exact=12)))(L, valid))
-    clustered = _numpy(jax.jit(jax.vmap(JPDA(max_exact=4, max_cluster_tracks=3)))(L, valid))
+    # Two tiers: clusters of <= 2 tracks as small ones, the 4 largest others with up to 3 tracks.
+    clustered = _numpy(jax.jit(jax.vmap(
+        JPDA(max_exact=4, max_cluster_tracks=3, max_cluster_measurements=3, max_large_clusters=4)
+    ))(L, valid))
     assert dense.ok.all() and clustered.ok.all()
     np.testing.assert_allclose(clustered.association_probabilities, dense.association_probabilities, atol=1e-13)
     np.testing.assert_allclose(clustered.log_normalizer, dense.log_normalizer, atol=1e-12)
     np.testing.assert_allclose(clustered.clutter_probabilities, dense.clutter_probabilities, atol=1e-13)
-    too_small = _numpy(jax.jit(jax.vmap(JPDA(max_exact=4, max_cluster_tracks=2)))(L, jnp.ones_like(valid)))
+    too_small = _numpy(jax.jit(jax.vmap(
+        JPDA(max_exact=4, max_cluster_tracks=2, max_cluster_measurements=3, max_large_clusters=4)
+    ))(L, jnp.ones_like(valid)))
     assert not too_small.ok.any()  # every problem has a 3-track cluster
+    few_columns = _numpy(jax.jit(jax.vmap(
+        JPDA(max_exact=4, max_cluster_tracks=3, max_cluster_measurements=2, max_large_clusters=4)
+    ))(L, jnp.ones_like(valid)))
+    assert not few_columns.ok.any()
 
 
 def test_jpda_options_are_checked():
     with pytest.raises(InputError, match="max_cluster_tracks"):
-        JPDA(max_exact=4, max_cluster_tracks=5)
+        JPDA(max_cluster_tracks=17)
+    with pytest.raises(InputError, match="max_large_clusters"):
+        JPDA(max_large_clusters=0)
 
 
 def test_jpda_infeasible_is_not_ok():

@@ -133,6 +133,11 @@ def test_gospa_matches_stone_soup(results, p):
             value, truth_to_est = metric.compute_gospa_metric(est, truth)
             want = value.value
             assigned = int(np.sum(np.asarray(truth_to_est) != -1)) if truth and est else 0
+            if truth and est:  # the same optimal pairs (generic cases: a unique optimum)
+                est_rank = np.where(ev[b], np.cumsum(ev[b]) - 1, -1)
+                ours = np.asarray(g.assignment[b])[tv[b]]
+                ours = np.where(ours >= 0, est_rank[np.maximum(ours, 0)], -1)
+                np.testing.assert_array_equal(ours, np.asarray(truth_to_est).ravel(), err_msg=f"case {b}")
         for part in ("distance", "localisation", "missed", "false"):
             np.testing.assert_allclose(getattr(g, part)[b], want[part], rtol=0, atol=ATOL, err_msg=f"{part}, case {b}")
         assert int(g.num_missed[b]) == round(want["missed"] / half), b
@@ -176,13 +181,22 @@ def test_padding_invariance_and_garbage():
     rng = np.random.default_rng(1)
     wide = [np.full((BATCH, 9, DIM), np.nan), np.zeros((BATCH, 9), bool),
             np.full((BATCH, 9, DIM), np.nan), np.zeros((BATCH, 9), bool)]
+    slot_of = {}
     for b in range(BATCH):
-        for points, valid, wp, wv in ((t, tv, wide[0], wide[1]), (e, ev, wide[2], wide[3])):
+        for i, (points, valid, wp, wv) in enumerate(((t, tv, wide[0], wide[1]), (e, ev, wide[2], wide[3]))):
             slots = np.sort(rng.permutation(9)[: SIZE])  # the same order, new slots among 9
             wp[b, slots], wv[b, slots] = points[b], valid[b]
+            slot_of[b, i] = slots
     g9, o9, grad9 = _run(tuple(jnp.asarray(a) for a in wide))
+    # The assignment names the same estimates in their new slots, for the truths in theirs.
+    for b in range(BATCH):
+        a6 = np.asarray(g6.assignment[b])
+        a9 = np.asarray(g9.assignment[b])[slot_of[b, 0]]
+        np.testing.assert_array_equal(np.where(a6 >= 0, slot_of[b, 1][np.maximum(a6, 0)], -1), a9)
     for a, b in ((g6, g9), (o6, o9)):
         for name, x in vars(a).items():
+            if name == "assignment":
+                continue
             y = getattr(b, name)
             if jnp.issubdtype(x.dtype, jnp.integer):
                 np.testing.assert_array_equal(x, y, err_msg=name)

@@ -216,3 +216,51 @@ def test_a_full_table_refuses_births_loudly(scenario):
         result = run_tracker(_tracker(JPDA(), capacity=2), z[:5], valid[:5])
     assert bool(result.overflow)
     assert int(result.final.num_dropped_births) > 0
+
+
+def test_score_tracks_counts_switches_breaks_and_false_tracks():
+    """A hand-made run: two targets, tracks 7 and 8 swap them at scan 2, target 1 loses its track
+    at scan 3, and track 9 (confirmed at scans 1-2) is never near a target."""
+    from jaxtrack.multitarget import score_tracks
+
+    T = 4
+    x = np.zeros((T, 2, 2))
+    x[:, 1, 0] = 100.0  # target 0 at the origin, target 1 at (100, 0)
+    alive = np.ones((T, 2), bool)
+    y = np.full((T, 3, 2), 500.0)
+    ids = np.array([[7, 8, -1], [7, 8, 9], [7, 8, 9], [7, 8, -1]])
+    conf = ids >= 0
+    y[:, 0] = [[0, 1], [0, 1], [100, 1], [100, 1]]  # track 7: target 0, then target 1
+    y[:, 1] = [[100, 1], [100, 1], [0, 1], [300, 0]]  # track 8: target 1, then target 0, then lost
+    g, s = jax.jit(lambda *a: score_tracks(*a, cutoff=20.0))(x, alive, y, conf, ids)
+    assert int(s.num_confirmed) == 3 and int(s.num_false) == 1
+    assert int(s.num_switches) == 2  # both targets change track at scan 2
+    assert int(s.num_breaks) == 1  # target 0 has no track at scan 3
+    np.testing.assert_array_equal(np.asarray(g.num_assigned), [2, 2, 2, 1])
+    np.testing.assert_allclose(np.asarray(g.false)[1], 20.0**2 / 2)  # track 9 at scan 1
+
+
+def test_tracker_monte_carlo_is_the_runs_it_says():
+    """Run i of the Monte Carlo is simulate_scenario(fold_in(key, i)) tracked and scored."""
+    from jaxtrack.multitarget import Scenario, score_tracks, simulate_scenario, tracker_monte_carlo
+
+    model = _model()
+    scenario = Scenario(
+        model, np.array([[40.0, 40.0, 1.2, 1.2], [160.0, 40.0, -1.2, 1.2]]), [0, 2], [15, 15],
+        detection_probability=P_D, clutter_rate=CLUTTER_RATE, clutter_region=REGION,
+        max_measurements=MAX_MEAS, num_steps=15,
+    )
+    tracker = _tracker(GNN())
+    key = jax.random.key(5)
+    mc = tracker_monte_carlo(tracker, scenario, key, 3, cutoff=10.0, block_size=4)
+    score = jax.jit(lambda *a: score_tracks(*a, cutoff=10.0))
+    per_run = []
+    for i in range(3):
+        truth = simulate_scenario(scenario, jax.random.fold_in(key, i))
+        r = run_tracker(tracker, truth.scans.measurements, truth.scans.valid)
+        g, s = score(truth.states[..., :2], truth.alive, r.mean[..., :2], r.status == CONFIRMED, r.track_id)
+        per_run.append((np.asarray(g.distance), np.asarray(g.false), int(s.num_confirmed)))
+    np.testing.assert_allclose(mc.gospa, np.mean([p[0] for p in per_run], axis=0), rtol=1e-12)
+    np.testing.assert_allclose(mc.false, np.mean([p[1] for p in per_run], axis=0), rtol=1e-12)
+    np.testing.assert_allclose(float(mc.scores.num_confirmed), np.mean([p[2] for p in per_run]))
+    assert np.all(mc.gospa_interval[:, 0] <= mc.gospa) and np.all(mc.gospa <= mc.gospa_interval[:, 1])

@@ -274,13 +274,16 @@ class JPDA(AbstractAssociator):
     **Arguments:**
 
     - ``max_exact``: the largest ``k = min(T, M)`` solved as one problem, with ``T``, ``M`` the
-      *padded* sizes (the subset table has ``2^k`` rows). Default 12 (4096 subsets).
-    - ``max_cluster_tracks``: for larger problems, the scan is split into the clusters of its
-      gating graph (tracks linked by a shared gated measurement; the joint events factor over
-      them, Fortmann, Bar-Shalom & Scheffe 1983) and each cluster of at most this many tracks is
+      *padded* sizes (the subset table has ``2^k`` rows). Default 8 (256 subsets).
+    - ``max_cluster_tracks``, ``max_cluster_measurements``, ``max_large_clusters``: for larger
+      problems the scan is split into the clusters of its gating graph (tracks linked by a
+      shared gated measurement; the joint events factor over them, Fortmann, Bar-Shalom &
+      Scheffe 1983), each holding only the measurements its tracks gate, and each cluster is
       solved exactly (:func:`~jaxtrack.association._clusters.solve_by_cluster`, static shapes:
-      every track a potential root). A larger cluster is not truncated in silence: ``ok`` is
-      False. Default 8 (256 subsets per cluster).
+      every track a potential root of a cluster of up to 3 tracks, plus the
+      ``max_large_clusters`` largest clusters of up to ``max_cluster_tracks`` tracks). Defaults
+      8 tracks, 24 measurements, 2 large clusters. A cluster beyond a cap is not truncated in
+      silence: ``ok`` is False.
 
     **Returns** (from ``__call__``): an :class:`~jaxtrack.association.Association` with
     ``log_normalizer = log Z`` (the scan's log likelihood ratio against "every measurement is
@@ -294,14 +297,22 @@ class JPDA(AbstractAssociator):
     be clutter.
     """
 
-    max_exact: int = eqx.field(static=True, default=12)
+    max_exact: int = eqx.field(static=True, default=8)
     max_cluster_tracks: int = eqx.field(static=True, default=8)
+    max_cluster_measurements: int = eqx.field(static=True, default=24)
+    max_large_clusters: int = eqx.field(static=True, default=2)
 
     def __check_init__(self):
-        if not 1 <= self.max_cluster_tracks <= self.max_exact <= 20:
+        if not 1 <= self.max_exact <= 16:
+            raise InputError(f"JPDA needs 1 <= max_exact <= 16; got max_exact={self.max_exact}.")
+        if not 1 <= self.max_cluster_tracks <= 16:
             raise InputError(
-                "JPDA needs 1 <= max_cluster_tracks <= max_exact <= 20; got "
-                f"max_cluster_tracks={self.max_cluster_tracks}, max_exact={self.max_exact}."
+                f"JPDA needs 1 <= max_cluster_tracks <= 16; got {self.max_cluster_tracks}."
+            )
+        if self.max_cluster_measurements < 1 or self.max_large_clusters < 1:
+            raise InputError(
+                "JPDA needs max_cluster_measurements >= 1 and max_large_clusters >= 1; got "
+                f"{self.max_cluster_measurements} and {self.max_large_clusters}."
             )
 
     def __call__(
@@ -315,7 +326,12 @@ class JPDA(AbstractAssociator):
             beta, log_Z, _ = _jpda_dense(L, valid)
             ok = jnp.ones((), bool)
         else:
-            beta, log_Z, ok, _ = solve_by_cluster(_jpda_dense, L, valid, self.max_cluster_tracks)
+            beta, log_Z, ok, _ = solve_by_cluster(
+                _jpda_dense, L, valid,
+                max_cluster_tracks=self.max_cluster_tracks,
+                max_cluster_measurements=self.max_cluster_measurements,
+                max_large_clusters=self.max_large_clusters,
+            )
         clutter = jnp.where(jnp.isfinite(log_Z), 1.0 - jnp.sum(beta[:, 1:], axis=0), jnp.nan)
         result = _result(beta, clutter, log_Z, jnp.zeros((), L.dtype), valid)
         return eqx.tree_at(lambda r: r.ok, result, result.ok & ok)

@@ -39,6 +39,8 @@ class GOSPA(eqx.Module):
       num_assigned``, ``num_false = |Y| − num_assigned``. A pair the solver matches at distance
       ``≥ c`` is counted as one missed and one false point (as Stone Soup does: it costs
       ``c^p``, the same as leaving both out).
+    - ``assignment``: ``(N,)`` int, the estimate each true point is assigned to in ``γ*`` (−1
+      when missed or padding): what track-level scores (switches, false tracks) are built on.
     """
 
     distance: Float[Array, ""]
@@ -48,6 +50,7 @@ class GOSPA(eqx.Module):
     num_assigned: Int[Array, ""]
     num_missed: Int[Array, ""]
     num_false: Int[Array, ""]
+    assignment: Int[Array, " N"]
 
 
 class OSPA(eqx.Module):
@@ -130,8 +133,9 @@ def _assign(truth, truth_valid, estimates, estimates_valid, c, p, unmatched):
     - padding–padding: 0.
 
     Every entry is finite (the solver is never given inf or NaN). **Returns:** ``(within, dp,
-    num_truth, num_estimates)`` where ``within`` ``(S,)`` marks the solver's valid pairs at
-    distance ``< c`` and ``dp`` ``(S,)`` their ``d^p`` (0 elsewhere).
+    num_truth, num_estimates, assignment)`` where ``within`` ``(S,)`` marks the solver's valid pairs at
+    distance ``< c``, ``dp`` ``(S,)`` their ``d^p`` (0 elsewhere), and the ``(N,)`` estimate index
+    of each true point (−1: none).
     """
     n_truth, n_est = truth.shape[0], estimates.shape[0]
     size = max(n_truth, n_est)
@@ -163,14 +167,19 @@ def _assign(truth, truth_valid, estimates, estimates_valid, c, p, unmatched):
     solver_cost = jax.lax.stop_gradient(cost)
     solver_cost = jnp.where(jnp.isfinite(solver_cost), solver_cost, 0.0)
     if size == 0:
-        rows = cols = jnp.zeros((0,), int)
+        rows = cols = jnp.zeros((0,), jnp.int32)
     else:
         # (row, column) pairs of a full matching (for a square matrix optax returns the row of
         # each column, in column order).
         rows, cols = optax.assignment.hungarian_algorithm(solver_cost)
     matched = within[rows, cols]
     dp = jnp.where(matched, dist_p[rows, cols], 0.0)
-    return matched, dp, jnp.sum(xv), jnp.sum(yv)
+    # The estimate of each true point (rows index truth, columns estimates; padding is never
+    # `within`, so padded columns never appear).
+    assignment = jnp.full((size,), -1, jnp.int32).at[rows].set(
+        jnp.where(matched, cols, -1).astype(jnp.int32)
+    )[:n_truth]
+    return matched, dp, jnp.sum(xv), jnp.sum(yv), assignment
 
 
 def gospa(
@@ -248,7 +257,9 @@ def gospa(
         truth, truth_valid, estimates, estimates_valid, cutoff, order
     )
     half = c**p / 2
-    matched, dp, n_truth, n_est = _assign(truth, truth_valid, estimates, estimates_valid, c, p, half)
+    matched, dp, n_truth, n_est, assignment = _assign(
+        truth, truth_valid, estimates, estimates_valid, c, p, half
+    )
     num_assigned = jnp.sum(matched)
     num_missed = n_truth - num_assigned
     num_false = n_est - num_assigned
@@ -263,6 +274,7 @@ def gospa(
         num_assigned=num_assigned,
         num_missed=num_missed,
         num_false=num_false,
+        assignment=assignment,
     )
 
 
@@ -325,7 +337,7 @@ def ospa(
         truth, truth_valid, estimates, estimates_valid, cutoff, order
     )
     cp = c**p
-    matched, dp, n_truth, n_est = _assign(truth, truth_valid, estimates, estimates_valid, c, p, cp)
+    matched, dp, n_truth, n_est, _ = _assign(truth, truth_valid, estimates, estimates_valid, c, p, cp)
     n = jnp.maximum(n_truth, n_est)
     m = jnp.minimum(n_truth, n_est)
     # The optimum pairs min(|X|, |Y|) valid points (a cut-off pair, c^p, is cheaper than two

@@ -4,7 +4,9 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
 - ``_scenario``: :class:`Scenario`, :func:`simulate_scenario` / :func:`simulate_scenarios` (padded
   scans with validity masks and the origin of every measurement);
 - ``_tracker``: :class:`TrackTable`, :class:`Tracker` (association method as a strategy),
-  :func:`run_tracker`.
+  :func:`run_tracker`;
+- ``_evaluation``: :func:`score_tracks` (GOSPA per scan, track counts) and
+  :func:`tracker_monte_carlo` (the Monte Carlo engine's run primitive over a scenario).
 """
 
 from ._scenario import (
@@ -17,6 +19,12 @@ from ._scenario import (
     crossing_targets as crossing_targets,
     simulate_scenario as simulate_scenario,
     simulate_scenarios as simulate_scenarios,
+)
+from ._evaluation import (
+    TrackerMonteCarloResult as TrackerMonteCarloResult,
+    TrackScores as TrackScores,
+    score_tracks as score_tracks,
+    tracker_monte_carlo as tracker_monte_carlo,
 )
 from ._tracker import (
     CONFIRMED as CONFIRMED,
@@ -53,4 +61,8 @@ __all__ = [
     "TrackManagement",
     "TrackTable",
     "run_tracker",
+    "TrackerMonteCarloResult",
+    "TrackScores",
+    "score_tracks",
+    "tracker_monte_carlo",
 ]
