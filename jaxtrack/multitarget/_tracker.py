@@ -59,7 +59,9 @@ class TrackTable(eqx.Module):
     **Fields** (``N`` = capacity, ``n`` = state dimension):
 
     - ``mean`` ``(N, n)``, ``cov`` ``(N, n, n)``: each slot's filtered moments after the last
-      scan (an empty slot holds zeros and the identity, so nothing non-finite is ever computed).
+      scan. An empty slot holds the initiator's prior: a point where every filter and sensor is
+      defined (zeros would put a range–bearing track on the sensor, where the Jacobian is
+      singular), so its discarded computations stay finite, and so do their gradients.
     - ``status`` ``(N,)`` int: :data:`EMPTY`, :data:`TENTATIVE` or :data:`CONFIRMED`.
     - ``existence`` ``(N,)``: the probability that the track is a target (JIPDA; 1 otherwise).
     - ``hits`` ``(N,)`` int: a bit mask of the last scans the track was hit in (bit 0 = the last
@@ -293,8 +295,8 @@ class Tracker(eqx.Module):
         dtype = self.initiator.prior_cov.dtype
         zeros_i = jnp.zeros((N,), jnp.int32)
         return TrackTable(
-            mean=jnp.zeros((N, n), dtype),
-            cov=jnp.broadcast_to(jnp.eye(n, dtype=dtype), (N, n, n)),
+            mean=jnp.broadcast_to(self.initiator.prior_mean.astype(dtype), (N, n)),
+            cov=jnp.broadcast_to(self.initiator.prior_cov.astype(dtype), (N, n, n)),
             status=zeros_i,
             existence=jnp.zeros((N,), dtype),
             hits=zeros_i,
@@ -326,7 +328,7 @@ class Tracker(eqx.Module):
         valid = jnp.asarray(valid, bool)
 
         # 1. Predict (a track born in the previous scan sits at that scan: predicted like the rest).
-        # Empty slots hold (0, I), so their prediction is finite and then discarded.
+        # Empty slots hold the initiator's prior, so their prediction is finite and then discarded.
         pred_mean, pred_cov = jax.vmap(lambda x, P: self.filter.predict(self.model, x, P, k))(
             table.mean, table.cov
         )
@@ -387,8 +389,8 @@ class Tracker(eqx.Module):
         status = jnp.where(confirm, CONFIRMED, table.status)
         status = jnp.where(delete, EMPTY, status)
         keep = status != EMPTY
-        mean = jnp.where(keep[:, None], post_mean, 0.0)
-        cov = jnp.where(keep[:, None, None], post_cov, jnp.eye(post_cov.shape[-1], dtype=dtype))
+        mean = jnp.where(keep[:, None], post_mean, self.initiator.prior_mean.astype(dtype))
+        cov = jnp.where(keep[:, None, None], post_cov, self.initiator.prior_cov.astype(dtype))
 
         # 6. Initiate at the unclaimed measurements, in free slots (ranks by cumulative sums).
         born_state = jax.vmap(lambda z: self._initiate(z, k))(measurements)
