@@ -6,7 +6,9 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
 - ``_tracker``: :class:`TrackTable`, :class:`Tracker` (association method as a strategy),
   :func:`run_tracker`;
 - ``_evaluation``: :func:`score_tracks` (GOSPA per scan, track counts) and
-  :func:`tracker_monte_carlo` (the Monte Carlo engine's run primitive over a scenario).
+  :func:`tracker_monte_carlo` (the Monte Carlo engine's run primitive over a scenario);
+- ``_learning``: :func:`fit_detection_and_clutter` (``P_D`` and the clutter density by maximum
+  likelihood of the tracker's scan log-likelihood, with standard errors).
 """
 
 from ._scenario import (
@@ -25,6 +27,10 @@ from ._evaluation import (
     TrackScores as TrackScores,
     score_tracks as score_tracks,
     tracker_monte_carlo as tracker_monte_carlo,
+)
+from ._learning import (
+    DetectionClutterFit as DetectionClutterFit,
+    fit_detection_and_clutter as fit_detection_and_clutter,
 )
 from ._tracker import (
     CONFIRMED as CONFIRMED,
@@ -65,4 +71,6 @@ __all__ = [
     "TrackScores",
     "score_tracks",
     "tracker_monte_carlo",
+    "DetectionClutterFit",
+    "fit_detection_and_clutter",
 ]

@@ -16,6 +16,11 @@ scenarios"), in the order of Stone Soup's ``MultiTargetMixtureTracker.__next__``
 5. **manage**: M-of-N confirmation, deletion after consecutive misses (or low existence);
 6. **initiate**: a tentative track at every measurement no track claimed, in free slots.
 
+Each step also reports the scan's log-likelihood given the predicted tracks,
+``−λV + M_k log λ − log M_k! + log Z_k`` with ``Z_k`` the association's ``log_normalizer``
+(:meth:`Tracker.step` derives it), the objective of
+:func:`~jaxtrack.multitarget.fit_detection_and_clutter`.
+
 What "a track claimed measurement j" and "a track was hit" mean follows Stone Soup: a
 detection hypothesis counts when its probability exceeds the track's missed-detection
 probability (``β[t, j] > β[t, 0]``); with GNN's one-hot rows that is "assigned".
@@ -197,7 +202,9 @@ class TrackerStepInfo(NamedTuple):
     ``association``: the scan's :class:`~jaxtrack.association.Association` (rows = table slots);
     ``log_weights``: the ``(N, 1 + M)`` matrix it was computed from; ``hit`` ``(N,)``: tracks hit
     in this scan; ``claimed`` ``(M,)``: measurements some track claimed; ``born`` ``(M,)``:
-    measurements that started a track; ``births_dropped`` ``()``: births refused in this scan.
+    measurements that started a track; ``births_dropped`` ``()``: births refused in this scan;
+    ``log_likelihood`` ``()``: the scan's log-likelihood given the predicted tracks, nats (log of
+    the scan's density in inverse measurement units; :meth:`Tracker.step` derives it).
     """
 
     association: Association
@@ -206,6 +213,7 @@ class TrackerStepInfo(NamedTuple):
     claimed: Bool[Array, " M"]
     born: Bool[Array, " M"]
     births_dropped: Int[Array, ""]
+    log_likelihood: Float[Array, ""]
 
 
 class Tracker(eqx.Module):
@@ -226,6 +234,13 @@ class Tracker(eqx.Module):
       ``P_D`` and ``λ`` are array leaves (differentiable).
     - ``capacity``: the number of track slots ``N`` (static).
     - ``existence``: None, or :class:`IntegratedExistence` for JIPDA.
+    - ``clutter_volume``: ``V``, the volume of the measurement-space region the clutter falls in
+      (e.g. m² for positions, m·rad for range and bearing; :attr:`Scenario.clutter_density` is
+      ``λ = rate / V``), > 0; or None (default). It enters only the scan log-likelihood's Poisson
+      count term ``−λV`` (:meth:`step`), which None leaves out. It is a field of the tracker, not
+      an argument of the likelihood, because it belongs with ``λ``: together they say what the
+      clutter is, and every run of the tracker (:func:`run_tracker`, vmapped Monte Carlo runs)
+      then reports the full log-likelihood without another argument to thread through.
     """
 
     filter: AbstractFilter
@@ -239,6 +254,7 @@ class Tracker(eqx.Module):
     gate: float = eqx.field(static=True)
     capacity: int = eqx.field(static=True)
     existence: IntegratedExistence | None
+    clutter_volume: Float[Array, ""] | None
 
     def __init__(
         self,
@@ -253,6 +269,7 @@ class Tracker(eqx.Module):
         capacity: int,
         management: TrackManagement | None = None,
         existence: IntegratedExistence | None = None,
+        clutter_volume: ArrayLike | None = None,
     ):
         if not isinstance(filter, AbstractFilter):
             raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
@@ -288,6 +305,15 @@ class Tracker(eqx.Module):
         self.gate = float(gate_threshold(self.prob_gate, model.meas_dim))
         self.capacity = int(capacity)
         self.existence = existence
+        self.clutter_volume = None if clutter_volume is None else jnp.asarray(clutter_volume, float)
+        if self.clutter_volume is not None and (
+            self.clutter_volume.shape != ()
+            or (is_concrete(self.clutter_volume) and not 0.0 < float(self.clutter_volume) < np.inf)
+        ):
+            raise InputError(
+                "`clutter_volume` must be a finite positive scalar (the clutter region's volume in "
+                f"measurement space) or None; got {np.asarray(clutter_volume)!r}."
+            )
 
     def init(self) -> TrackTable:
         """The empty table before the first scan."""
@@ -311,7 +337,7 @@ class Tracker(eqx.Module):
     def step(
         self, table: TrackTable, measurements: Float[Array, "M m"], valid: Bool[Array, " M"]
     ) -> tuple[TrackTable, TrackerStepInfo]:
-        """One scan: predict, hypothesise, associate, update, manage, initiate.
+        r"""One scan: predict, hypothesise, associate, update, manage, initiate.
 
         **Arguments:**
 
@@ -320,6 +346,52 @@ class Tracker(eqx.Module):
           ``valid``: boolean ``(M,)``, False for padding.
 
         **Returns:** ``(new_table, TrackerStepInfo)``.
+
+        **The scan log-likelihood** (``TrackerStepInfo.log_likelihood``). Given the ``N`` predicted
+        tracks, each with predictive density ``p_t(z) = N(z; ẑ_t, S_t)`` (the filter's Gaussian
+        approximation) and existence ``r_t`` (1 without JIPDA), each detected independently with
+        probability ``P_D``, and clutter a Poisson process of intensity ``λ`` on a region of volume
+        ``V`` (a ``Poisson(λV)`` count of points uniform on it), the scan ``Z_k = (z_1, …, z_M)``
+        (``M = M_k`` valid measurements, in random order) has the density of the standard
+        multi-target measurement model (Mahler 2007, *Statistical Multisource-Multitarget
+        Information Fusion*, §12.3; the JPDA joint-event probabilities with the parametric
+        (Poisson) clutter model, Bar-Shalom, Daum & Huang 2009, "The probabilistic data
+        association filter", IEEE Control Syst. Mag. 29(6); Bar-Shalom, Willett & Tian 2011,
+        *Tracking and Data Fusion*, the JPDA chapter). Summing over the joint association events
+        ``θ`` (each track missed, ``θ_t = 0``, or given its own measurement ``θ_t = j``; the
+        measurements no track takes are clutter):
+
+        .. math::
+
+            p(Z_k) &= \frac{1}{M!} \sum_θ e^{−λV} λ^{M − D(θ)}
+                      \prod_{t:\,θ_t = 0} (1 − r_t P_D) \prod_{t:\,θ_t ≥ 1} r_t P_D\, p_t(z_{θ_t}) \\
+                   &= \frac{e^{−λV} λ^M}{M!} \sum_θ \prod_t e^{L[t, θ_t]},
+
+        with ``D(θ)`` the number of detected tracks: the Poisson probability of the ``M − D``
+        clutter points, ``e^{−λV}(λV)^{M−D}/(M−D)!``, times their uniform densities ``V^{−(M−D)}``,
+        times the ``(M−D)!/M!`` chance of the order, leaves ``e^{−λV} λ^{M−D}/M!``, and dividing
+        each detected track's factor by ``λ`` turns it into ``exp L[t, θ_t]`` of
+        :func:`~jaxtrack.association.log_likelihood_ratios`. The sum is the association's
+        partition function ``Z_k`` (``Association.log_normalizer``: Fortmann, Bar-Shalom & Scheffe
+        1983; the partition function of Williams & Lau 2014, "Approximate evaluation of marginal
+        association probabilities with belief propagation", IEEE TAES 50(4)), so
+
+        .. math::
+
+            \log p(Z_k) = −λV + M_k \log λ − \log M_k! + \log Z_k .
+
+        It is exact for :class:`~jaxtrack.association.JPDA` with ``P_G = 1``, given the tracks'
+        Gaussian predictions (which the earlier scans' mixture collapses already approximate);
+        :class:`~jaxtrack.association.LoopyBP` gives its Bethe estimate of ``log Z_k``, ``PDA`` the
+        product of independent rows (events sharing a measurement counted), ``GNN`` the best event
+        only (a lower bound). With a gate (``P_G < 1``) it is the usual truncated approximation: a
+        track is detected inside its gate with probability ``P_D P_G`` (the missed weight
+        ``1 − r P_D P_G``), with the gate-truncated density ``p_t/P_G``, and a measurement outside
+        every gate counts as clutter, although a target's detection falls outside its gate with
+        probability ``P_D(1 − P_G)``. Targets without a track yet (their first scan) count as
+        clutter, and tracks born from clutter count as targets (with existence ``r``: JIPDA with a
+        small initial existence keeps their weight small). ``clutter_volume=None`` leaves out
+        ``−λV``; without it the log-likelihood grows without bound in ``λ``.
         """
         k = table.step
         live = table.live
@@ -349,7 +421,9 @@ class Tracker(eqx.Module):
             clutter_density=self.clutter_density,
             gate_threshold=self.gate,
             prob_gate=self.prob_gate,
-            existence=existence_pred if self.existence is not None else None,
+            # Empty slots hold existence 0; give them 1 (their rows are replaced as padding anyway)
+            # so that the log(r) inside is finite there and reverse mode gets no 0·inf = NaN.
+            existence=jnp.where(live, existence_pred, 1.0) if self.existence is not None else None,
         )
         association = self.association(log_weights, live)
         beta = association.association_probabilities
@@ -360,6 +434,9 @@ class Tracker(eqx.Module):
             pdpg = self.prob_detect * self.prob_gate
             undetected = existence_pred * (1.0 - pdpg) / (1.0 - existence_pred * pdpg)
             exist_post = beta[:, 0] * undetected + jnp.sum(beta[:, 1:], axis=1)
+            # A sum of probabilities can round to just above 1 (with P_S = 1 and r → 1), which the
+            # next scan's log_likelihood_ratios rejects (NaN under jit): keep it a probability.
+            exist_post = jnp.minimum(exist_post, 1.0)
             safe = jnp.where(exist_post > 0, exist_post, 1.0)
             weights = jnp.concatenate([(beta[:, :1] * undetected[:, None]), beta[:, 1:]], axis=1)
             weights = weights / safe[:, None]
@@ -434,7 +511,15 @@ class Tracker(eqx.Module):
             step=k + 1,
             num_dropped_births=table.num_dropped_births + dropped.astype(jnp.int32),
         )
-        info = TrackerStepInfo(association, log_weights, hit, claimed, born, dropped.astype(jnp.int32))
+        # 7. The scan's log-likelihood given the predicted tracks (derived in the docstring).
+        num_meas = jnp.sum(valid).astype(dtype)
+        clutter_density = self.clutter_density.astype(dtype)
+        log_likelihood = (num_meas * jnp.log(clutter_density) - jax.scipy.special.gammaln(num_meas + 1.0)
+                          + association.log_normalizer.astype(dtype))
+        if self.clutter_volume is not None:
+            log_likelihood = log_likelihood - clutter_density * self.clutter_volume.astype(dtype)
+        info = TrackerStepInfo(association, log_weights, hit, claimed, born, dropped.astype(jnp.int32),
+                               log_likelihood)
         return new_table, info
 
     def _initiate(self, z, k):
@@ -458,7 +543,10 @@ class TrackerResult(eqx.Module):
     **Fields:** ``mean`` ``(T, N, n)``, ``cov`` ``(T, N, n, n)`` (None unless
     ``save_cov=True``), ``status`` ``(T, N)``, ``existence`` ``(T, N)``, ``track_id`` ``(T, N)``:
     the table's fields after scan ``k``; ``association_probabilities`` ``(T, N, 1 + M)``;
-    ``final``: the last :class:`TrackTable`; ``overflow`` ``()``: a birth was refused.
+    ``final``: the last :class:`TrackTable`; ``overflow`` ``()``: a birth was refused;
+    ``log_likelihood`` ``(T,)``: each scan's log-likelihood given the tracks predicted into it
+    (nats; :meth:`Tracker.step`), whose sum is the run's log-likelihood under the tracker's
+    approximations (maximised by :func:`~jaxtrack.multitarget.fit_detection_and_clutter`).
     """
 
     mean: Float[Array, "T N n"]
@@ -469,6 +557,7 @@ class TrackerResult(eqx.Module):
     association_probabilities: Float[Array, "T N Mp1"]
     final: TrackTable
     overflow: Bool[Array, ""]
+    log_likelihood: Float[Array, " T"]
 
 
 @eqx.filter_jit
@@ -482,13 +571,14 @@ def _run_tracker(tracker, measurements, valid, save_cov):
             table.existence,
             table.track_id,
             info.association.association_probabilities,
+            info.log_likelihood,
         )
         return table, out
 
-    final, (mean, cov, status, existence, track_id, beta) = jax.lax.scan(
+    final, (mean, cov, status, existence, track_id, beta, log_likelihood) = jax.lax.scan(
         body, tracker.init(), (measurements, valid)
     )
-    return TrackerResult(mean, cov, status, existence, track_id, beta, final, final.overflow)
+    return TrackerResult(mean, cov, status, existence, track_id, beta, final, final.overflow, log_likelihood)
 
 
 def run_tracker(
