@@ -172,7 +172,7 @@ def test_demo_writer_closes_its_figure(demo_run):
 def test_importing_plotting_and_figures_keeps_the_users_backend():
     """A notebook's backend survives importing the plotting module and every study's figures."""
     code = ("import matplotlib; matplotlib.use('svg'); import importlib, jaxtrack.plotting\n"
-            "for s in ('bearings_tma', 'ho_sensitivity', 'maneuvering', 'obem_registration', 'radar_bias',"
+            "for s in ('bearings_tma', 'ho_sensitivity', 'maneuvering', 'multitarget', 'obem_registration', 'radar_bias',"
             " 'sar_navigation'):\n"
             "    importlib.import_module(f'jaxtrack.applications.{s}.figures')\n"
             "import matplotlib.pyplot as plt; print(matplotlib.get_backend(), len(plt.get_fignums()))")
