@@ -135,41 +135,43 @@ def test_jpda_small_and_empty(T, M):
 
 
 def _clustered_problem(rng, num_clusters=4, size=3, M_per=3):
-    """``num_clusters`` independent blocks of ``size`` tracks x ``M_per`` measurements, shuffled."""
+    """``num_clusters`` independent blocks of ``size`` tracks x ``M_per`` measurements, shuffled;
+    with the exact answer from brute force on each block (the events factor over blocks)."""
     T, M = num_clusters * size, num_clusters * M_per
     L = np.full((T, 1 + M), NINF)
     L[:, 0] = np.log(rng.uniform(0.05, 0.7, T))
+    beta, log_Z = np.zeros((T, 1 + M)), 0.0
     for c in range(num_clusters):
+        rows, cols = slice(c * size, (c + 1) * size), slice(1 + c * M_per, 1 + (c + 1) * M_per)
         block = rng.normal(1.0, 2.0, (size, M_per))
         block[rng.uniform(size=block.shape) < 0.3] = NINF
-        L[c * size:(c + 1) * size, 1 + c * M_per:1 + (c + 1) * M_per] = block
-    return L[rng.permutation(T)][:, np.r_[0, 1 + rng.permutation(M)]]
+        L[rows, cols] = block
+        b, _, z = brute_force(np.concatenate([L[rows, :1], block], axis=1))
+        beta[rows, 0], beta[rows, cols], log_Z = b[:, 0], b[:, 1:], log_Z + z
+    perm_t, perm_m = rng.permutation(T), np.r_[0, 1 + rng.permutation(M)]
+    return L[perm_t][:, perm_m], beta[perm_t][:, perm_m], log_Z
 
 
 def test_jpda_clusters_a_large_scan_exactly():
-    """Above ``max_exact`` the scan is solved cluster by cluster: the same marginals as one DP
-    (the joint events factor over the gating graph's components), and a cluster over the cap
-    is reported (ok False), not truncated."""
+    """Above ``max_exact`` the scan is solved cluster by cluster (two tiers: clusters of <= 2
+    tracks as small ones, the 4 largest others with up to 3): the marginals of brute force on
+    each block (the joint events factor over the gating graph's components), and a cluster
+    over a cap is reported (ok False), not truncated."""
     rng = np.random.default_rng(11)
-    L = jnp.asarray(np.stack([_clustered_problem(rng) for _ in range(BATCH)]))  # (50, 12, 13)
-    valid = jnp.asarray(rng.uniform(size=(BATCH, 12)) < 0.9)
-    dense = _numpy(jax.jit(jax.vmap(JPDA(max_exact=12)))(L, valid))
-    # Two tiers: clusters of <= 2 tracks as small ones, the 4 largest others with up to 3 tracks.
+    cases = [_clustered_problem(rng) for _ in range(BATCH)]
+    L = jnp.asarray(np.stack([c[0] for c in cases]))  # (50, 12, 13)
     clustered = _numpy(jax.jit(jax.vmap(
         JPDA(max_exact=4, max_cluster_tracks=3, max_cluster_measurements=3, max_large_clusters=4)
-    ))(L, valid))
-    assert dense.ok.all() and clustered.ok.all()
-    np.testing.assert_allclose(clustered.association_probabilities, dense.association_probabilities, atol=1e-13)
-    np.testing.assert_allclose(clustered.log_normalizer, dense.log_normalizer, atol=1e-12)
-    np.testing.assert_allclose(clustered.clutter_probabilities, dense.clutter_probabilities, atol=1e-13)
-    too_small = _numpy(jax.jit(jax.vmap(
-        JPDA(max_exact=4, max_cluster_tracks=2, max_cluster_measurements=3, max_large_clusters=4)
-    ))(L, jnp.ones_like(valid)))
-    assert not too_small.ok.any()  # every problem has a 3-track cluster
-    few_columns = _numpy(jax.jit(jax.vmap(
-        JPDA(max_exact=4, max_cluster_tracks=3, max_cluster_measurements=2, max_large_clusters=4)
-    ))(L, jnp.ones_like(valid)))
-    assert not few_columns.ok.any()
+    ))(L))
+    assert clustered.ok.all()
+    np.testing.assert_allclose(clustered.association_probabilities, np.stack([c[1] for c in cases]), atol=1e-13)
+    np.testing.assert_allclose(clustered.log_normalizer, [c[2] for c in cases], atol=1e-12)
+    np.testing.assert_allclose(clustered.clutter_probabilities,
+                               1.0 - np.stack([c[1] for c in cases])[:, :, 1:].sum(axis=1), atol=1e-13)
+    # Caps: a 3-track cluster over max_cluster_tracks=2, or 3 gated measurements over 2.
+    for too_small in (JPDA(max_exact=4, max_cluster_tracks=2, max_cluster_measurements=3, max_large_clusters=4),
+                      JPDA(max_exact=4, max_cluster_tracks=3, max_cluster_measurements=2, max_large_clusters=4)):
+        assert not _numpy(jax.jit(jax.vmap(too_small))(L)).ok.any()
 
 
 def test_jpda_options_are_checked():
