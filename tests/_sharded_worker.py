@@ -6,6 +6,7 @@ Usage: ``python _sharded_worker.py DEVICES [COORDINATOR NUM_PROCESSES PROCESS_ID
 """
 
 import json
+import os
 import sys
 
 import jax
@@ -32,7 +33,10 @@ key = jax.random.key(3)
 # "two": a mesh on part of the devices (in two processes, the first device of each).
 two = jax.devices()[:2] if jax.process_count() == 1 else [jax.devices()[0], jax.devices()[-1]]
 meshes = {"all": run_mesh(), "two": run_mesh(two)}
-for name, case in cases().items():
+# JAXTRACK_SHARDED_CASES=kf,ekf_detect runs a subset of the cases (comma-separated names).
+only = os.environ.get("JAXTRACK_SHARDED_CASES")
+selected = {k: v for k, v in cases().items() if only is None or k in only.split(",")}
+for name, case in selected.items():
     for mesh_name, mesh in meshes.items():
         res = monte_carlo(key=key, num_runs=NUM_RUNS, num_steps=NUM_STEPS, progress=False, mesh=mesh, **case)
         out["runs"][f"{name} / {mesh_name}"] = stats(res)

@@ -30,9 +30,11 @@ WORKER = Path(__file__).with_name("_sharded_worker.py")
 KEY = jax.random.key(3)
 
 
-def start_worker(*args):
+def start_worker(*args, cases=None):
     env = dict(os.environ)
     env.pop("XLA_FLAGS", None)
+    if cases is not None:
+        env["JAXTRACK_SHARDED_CASES"] = ",".join(cases)
     return subprocess.Popen([sys.executable, str(WORKER), *map(str, args)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env, cwd=WORKER.parent)
 
@@ -44,9 +46,9 @@ def result_of(proc, timeout=600):
     return json.loads(next(line for line in out.splitlines() if line.startswith("{")))
 
 
-def reference():
+def reference(names=None):
     return {name: monte_carlo(key=KEY, num_runs=NUM_RUNS, num_steps=NUM_STEPS, progress=False, **case)
-            for name, case in cases().items()}
+            for name, case in cases().items() if names is None or name in names}
 
 
 def assert_identical(stats, res, label):
@@ -97,14 +99,19 @@ def free_port():
         return s.getsockname()[1]
 
 
-def test_two_processes_give_the_single_process_statistics():
-    """Two local processes with 2 CPU devices each, joined on loopback, form one 4-device mesh."""
+def test_two_processes_give_the_single_process_statistics(request):
+    """Two local processes with 2 CPU devices each, joined on loopback, form one 4-device mesh.
+
+    Two of the four cases (the shared-covariance path and the per-run path with per-run
+    detections: 65 -> ~35 worker-s) unless --runslow; the single-process tests run all four."""
     coordinator = f"127.0.0.1:{free_port()}"
-    procs = [start_worker(2, coordinator, 2, i) for i in range(2)]
+    subset = None if request.config.getoption("--runslow") else ("kf", "ekf_detect")
+    procs = [start_worker(2, coordinator, 2, i, cases=subset) for i in range(2)]
     outs = [result_of(p) for p in procs]
-    ref = reference()
+    ref = reference(subset)
     for i, out in enumerate(outs):
         assert (out["process_count"], out["device_count"]) == (2, 4)
+        assert len(out["runs"]) == 2 * (4 if subset is None else len(subset))
         for label, stats in out["runs"].items():
             assert_identical(stats, ref[label.split(" / ")[0]], f"process {i}: {label}")
 
