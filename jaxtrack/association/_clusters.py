@@ -95,7 +95,10 @@ def solve_by_cluster(
         present = members < T
         rows = jnp.minimum(members, T - 1)
         sub = L_pad[rows][:, jnp.concatenate([jnp.zeros((1,), cols.dtype), cols + 1])]
-        beta, log_z, ok = solve(sub, present & valid_tracks[rows])
+        sub_valid = present & valid_tracks[rows]
+        # Padding rows (copies of a real row) become inert: certainly missed, weight 1.
+        inert = jnp.concatenate([jnp.zeros_like(sub[:, :1]), jnp.full_like(sub[:, 1:], -jnp.inf)], axis=1)
+        beta, log_z, ok = solve(jnp.where(sub_valid[:, None], sub, inert), sub_valid)
         return members, cols, beta, log_z, ok
 
     def scatter(beta, members, cols, beta_sub, use):

@@ -339,8 +339,7 @@ class JPDA(AbstractAssociator):
 
 def _jpda_dense(L: Array, valid: Array) -> tuple[Array, Array, Array]:
     """Exact marginals of one (sub-)problem by the subset DP: ``(beta, log_Z, ok)``."""
-    L = jnp.where(valid[:, None], L, jnp.concatenate(
-        [jnp.zeros_like(L[:, :1]), jnp.full_like(L[:, 1:], -jnp.inf)], axis=1))
+    # Padded rows are already inert ([0, -inf, ...]): _prepare, or solve_by_cluster's padding.
     T, M = L.shape[0], L.shape[1] - 1
     missed, ratios = L[:, 0], L[:, 1:]
     if T <= M:

@@ -52,7 +52,7 @@ class TrackScores(eqx.Module):
     num_breaks: Int[Array, ""]
 
 
-def _positions(layout, n: int, name: str) -> tuple[int, ...]:
+def _positions(layout, name: str) -> tuple[int, ...]:
     if layout is None:
         raise InputError(
             f"`{name}` declares no state layout, so the position components to score are unknown; "
@@ -231,8 +231,8 @@ def tracker_monte_carlo(
             f"the tracker's model measures {tracker.model.meas_dim} components, the scenario's "
             f"sensor {scenario.model.meas_dim}."
         )
-    target_idx = _positions(scenario.model.state_layout, scenario.model.state_dim, "scenario.model")
-    track_idx = _positions(tracker.model.state_layout, tracker.model.state_dim, "tracker.model")
+    target_idx = _positions(scenario.model.state_layout, "scenario.model")
+    track_idx = _positions(tracker.model.state_layout, "tracker.model")
     if len(target_idx) != len(track_idx):
         raise InputError(
             f"the scenario's targets have {len(target_idx)} position axes, the tracker's states "
