@@ -8,8 +8,9 @@ from jaxtrack.filters import ExtendedKalmanFilter, KalmanFilter
 from jaxtrack.models import constant_velocity
 
 # Not multiples of the block sizes (2048 shared, 512 per run) or of the device counts: the last
-# round has partial and empty blocks.
-NUM_RUNS = 5000
+# round has partial and empty blocks (4 devices: shared 2048 + 552, per run 4 x 512 + 552, i.e.
+# one full, one partial and two empty blocks).
+NUM_RUNS = 2600
 SWEEP_RUNS = 1500
 NUM_STEPS = 25
 SWEEP_VALUES = (0.1, 0.5, 2.0)  # acceleration PSD of the truth (m²/s³); the filter assumes 0.5
