@@ -27,12 +27,6 @@ GALLERY_DIR = ROOT / "docs" / "gallery"
 # Generous per-cell limit: on a loaded 2-core machine the first cell of a notebook also pays for
 # JAX's import and the first compilations.
 CELL_TIMEOUT_S = 600
-# The kernels compile with XLA's CPU backend at LLVM -O0: at the small size a notebook's time is
-# mostly compilation (fitting_tracker: 90.4 s at the default level, 48.5 s at -O0; radar_tracking
-# 46.1 s and 43.1 s; same machine, same load). XLA's own HLO passes (fusion) still run and
-# neither level enables fast-math, so the notebooks compute the same numbers; only their
-# executables are less optimised. A user's kernel keeps the default.
-KERNEL_XLA_FLAGS = "--xla_backend_optimization_level=0"
 
 
 def gallery_path(source: Path) -> Path:
@@ -45,14 +39,12 @@ def execute_notebook(source: Path, workdir: Path) -> nbformat.NotebookNode:
 
     ``workdir`` is the kernel's working directory (whatever the notebook writes lands there).
     The small size is requested through the environment, which the kernel inherits;
-    ``MPLBACKEND`` is removed so the kernel keeps its inline backend, as a user's Jupyter does;
-    ``KERNEL_XLA_FLAGS`` is added to ``XLA_FLAGS`` (faster compilation, see its comment).
+    ``MPLBACKEND`` is removed so the kernel keeps its inline backend, as a user's Jupyter does.
     """
     nb = nbformat.read(source, as_version=4)
-    saved = {k: os.environ.get(k) for k in ("JAXTRACK_NOTEBOOK_SMALL", "MPLBACKEND", "XLA_FLAGS")}
+    saved = {k: os.environ.get(k) for k in ("JAXTRACK_NOTEBOOK_SMALL", "MPLBACKEND")}
     os.environ["JAXTRACK_NOTEBOOK_SMALL"] = "1"
     os.environ.pop("MPLBACKEND", None)
-    os.environ["XLA_FLAGS"] = f"{saved['XLA_FLAGS'] or ''} {KERNEL_XLA_FLAGS}".strip()
     try:
         client = NotebookClient(
             nb, timeout=CELL_TIMEOUT_S, kernel_name="python3", resources={"metadata": {"path": str(workdir)}}
