@@ -46,6 +46,7 @@ TYPECHECKED = [
     "jaxtrack.filters._consider",
     "jaxtrack.filters._iterated",
     "jaxtrack.filters._square_root",
+    "jaxtrack.filters._parallel",
     "jaxtrack.models._motion",
     "jaxtrack.models._sensors",
     "jaxtrack.models._converted",

@@ -3,7 +3,9 @@
 - ``_updates``: the two measurement updates (linearised, moments) and the update forms;
 - ``_base``: :class:`AbstractFilter` (``init``/``step``), :class:`FilterState`, :func:`run_filter`;
 - ``_kalman``, ``_unscented``: the filter families; ``_smoother``: RTS;
-- ``_batch``: many runs at once, with the covariance strategy (shared or per run).
+- ``_batch``: many runs at once, with the covariance strategy (shared or per run);
+- ``_parallel``: how a run traverses time (``scan=``): sequential, or parallel-in-time;
+- ``_particle``: the particle filter (same ``init``/``step``); ``_resampling``: its resampling schemes.
 """
 
 from ._base import (
@@ -21,6 +23,12 @@ from ._batch import (
     SharedCovariance as SharedCovariance,
     covariance_pass as covariance_pass,
     run_filter_batch as run_filter_batch,
+)
+from ._parallel import (
+    AbstractTimeScan as AbstractTimeScan,
+    AutoScan as AutoScan,
+    ParallelInTime as ParallelInTime,
+    Sequential as Sequential,
 )
 from ._kalman import (
     ExtendedKalmanFilter as ExtendedKalmanFilter,
@@ -60,6 +68,28 @@ from ._imm import (
     run_imm as run_imm,
 )
 from ._imm_smoother import IMMSmootherResult as IMMSmootherResult, imm_smoother as imm_smoother
+from ._particle import (
+    AbstractProposal as AbstractProposal,
+    Bootstrap as Bootstrap,
+    LocallyOptimal as LocallyOptimal,
+    ParticleFilter as ParticleFilter,
+    ParticleState as ParticleState,
+)
+from ._resampling import (
+    AbstractResampling as AbstractResampling,
+    AbstractResamplingScheme as AbstractResamplingScheme,
+    Multinomial as Multinomial,
+    Residual as Residual,
+    SoftResampling as SoftResampling,
+    StopGradientResampling as StopGradientResampling,
+    Stratified as Stratified,
+    Systematic as Systematic,
+    effective_sample_size as effective_sample_size,
+    multinomial_indices as multinomial_indices,
+    residual_indices as residual_indices,
+    stratified_indices as stratified_indices,
+    systematic_indices as systematic_indices,
+)
 
 __all__ = [
     "AbstractFilter",
@@ -74,6 +104,10 @@ __all__ = [
     "SharedCovariance",
     "covariance_pass",
     "run_filter_batch",
+    "AbstractTimeScan",
+    "AutoScan",
+    "ParallelInTime",
+    "Sequential",
     "ExtendedKalmanFilter",
     "KalmanFilter",
     "MeanMap",
@@ -101,4 +135,22 @@ __all__ = [
     "run_imm",
     "IMMSmootherResult",
     "imm_smoother",
+    "AbstractProposal",
+    "Bootstrap",
+    "LocallyOptimal",
+    "ParticleFilter",
+    "ParticleState",
+    "AbstractResampling",
+    "AbstractResamplingScheme",
+    "Multinomial",
+    "Residual",
+    "SoftResampling",
+    "StopGradientResampling",
+    "Stratified",
+    "Systematic",
+    "effective_sample_size",
+    "multinomial_indices",
+    "residual_indices",
+    "stratified_indices",
+    "systematic_indices",
 ]

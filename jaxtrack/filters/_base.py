@@ -23,6 +23,7 @@ from .._export import Exportable
 from .._validation import InputError, check_shape, covariance_ok, is_concrete
 from ..models import AbstractStateSpaceModel
 from ._linalg import marginal_cov
+from ._parallel import AbstractTimeScan, AutoScan, Sequential, resolve_scan
 from ._updates import (  # noqa: F401  (re-exported: the update functions' historical home)
     AbstractUpdateForm,
     Conditioned,
@@ -100,9 +101,14 @@ class AbstractFilter(eqx.Module):
     instead of covariances (:class:`~jaxtrack.filters.SquareRootKalmanFilter`,
     :class:`~jaxtrack.filters.SquareRootUnscentedKalmanFilter`); :func:`run_filter` then squares
     them once at the end and also returns the factors.
+
+    ``needs_key`` (class-level flag): True for filters that draw random numbers (the
+    :class:`~jaxtrack.filters.ParticleFilter`): their ``init(model, key=...)`` takes a PRNG key, and
+    batches and Monte Carlo runs give every run its own (:mod:`jaxtrack.montecarlo`: from the run's key).
     """
 
     square_root: ClassVar[bool] = False
+    needs_key: ClassVar[bool] = False
 
     @abc.abstractmethod
     def predict(
@@ -324,8 +330,9 @@ def _scan_filter(filter, model, measurements, observed, first_step, save):
 
 
 @eqx.filter_jit
-def _run_filter_jit(filter, model, measurements, observed, first_step, save, throw, check_noise):
-    result = _scan_filter(filter, model, measurements, observed, first_step, save)
+def _run_filter_jit(filter, model, measurements, observed, first_step, save, throw, check_noise, scan=Sequential()):
+    # `scan` is resolved (Sequential or ParallelInTime); Sequential's pass is `_scan_filter`.
+    result = scan.filter_pass(filter, model, measurements, observed, first_step, save)
     # An indefinite or non-finite prior can run to a finite, meaningless result. The model's
     # constructor rejects it when the prior is concrete; under tracing (a prior built inside
     # jit/vmap/grad) only this check sees it. One (n, n) eigvalsh per run, outside the scan.
@@ -517,8 +524,9 @@ def run_filter(
     save: Save = "all",
     nan_as_missing: bool = False,
     throw: bool = True,
+    scan: AbstractTimeScan = AutoScan(),
 ) -> FilterResult:
-    """Run ``filter`` on ``model`` over ``measurements`` with one jitted ``lax.scan``.
+    """Run ``filter`` on ``model`` over ``measurements``: one jitted ``lax.scan`` (or associative scan).
 
     **Arguments:**
 
@@ -539,11 +547,16 @@ def run_filter(
     - ``throw``: raise at run time if the result is non-finite or the model's prior (and, for a
       model built under ``jit``/``vmap``/``grad``, its ``Q`` and ``R``) is not a valid
       covariance. Use ``throw=False`` inside ``vmap`` and read ``result.ok`` per run.
+    - ``scan``: how time is traversed, a :class:`~jaxtrack.filters.AbstractTimeScan`:
+      :class:`~jaxtrack.filters.Sequential` (one ``lax.scan``, any filter),
+      :class:`~jaxtrack.filters.ParallelInTime` (an associative scan, ``O(log T)`` deep; the
+      ``KalmanFilter`` on a linear model) or :class:`~jaxtrack.filters.AutoScan` (default:
+      sequential on CPU, parallel on an accelerator for long runs). The result is the same.
 
     **Returns:** a :class:`FilterResult`.
 
     **Raises:** ``InputError`` for wrong shapes, a mask that is not boolean, non-finite
-    measurements, or a model the filter cannot handle.
+    measurements, a model the filter cannot handle, or a ``scan`` that does not apply.
 
     Example::
 
@@ -554,4 +567,5 @@ def run_filter(
     """
     check_run_arguments(filter, model, first_step, save)
     z, observed = prepare_measurements(model, measurements, mask, nan_as_missing)
-    return _run_filter_jit(filter, model, z, observed, first_step, save, throw, _model_is_traced(model))
+    scan = resolve_scan(scan, filter, model, z.shape[0])
+    return _run_filter_jit(filter, model, z, observed, first_step, save, throw, _model_is_traced(model), scan)

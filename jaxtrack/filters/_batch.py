@@ -390,10 +390,16 @@ def _run_per_run(filter, model, z, observed, first_step, save, throw):
     z = _zero_missing(z, observed)
 
     def one(args):
-        z_i, obs_i = args if per_run_mask else (args, observed)
+        data, i = args
+        z_i, obs_i = data if per_run_mask else (data, observed)
+        # A filter that draws (a particle filter): run i uses fold_in(filter.key, i).
+        if filter.needs_key:
+            return _scan_filter(eqx.tree_at(lambda f: f.key, filter, jax.random.fold_in(filter.key, i)),
+                                model, z_i, obs_i, first_step, save)
         return _scan_filter(filter, model, z_i, obs_i, first_step, save)
 
-    res = map_blocks(one, (z, observed) if per_run_mask else z, _RUN_BLOCK)
+    runs = jnp.arange(z.shape[0])
+    res = map_blocks(one, ((z, observed) if per_run_mask else z, runs), _RUN_BLOCK)
     result = BatchFilterResult(
         res.filtered_mean, res.filtered_cov, res.predicted_mean, res.predicted_cov,
         res.innovation, res.innovation_cov, res.num_observed, res.log_likelihood,

@@ -12,6 +12,7 @@ from .._export import Exportable
 from ..models import AbstractStateSpaceModel
 from ._base import AbstractFilter, FilterResult, FirstStep, run_filter, symmetrize
 from ._kalman import KalmanFilter
+from ._parallel import AbstractTimeScan, AutoScan, Sequential, resolve_scan
 
 
 class SmootherResult(Exportable, eqx.Module):
@@ -92,8 +93,9 @@ def _smoother_gain(P_f: Array, F: Array, P_p: Array) -> Array:
     return jnp.where(regular, G_chol, G_pinv)
 
 
-@eqx.filter_jit
-def _rts_backward(model, filtered: FilterResult, throw: bool):
+def _rts_scan(model, filtered: FilterResult) -> tuple[Array, Array, Array]:
+    """The sequential backward pass (one reverse ``lax.scan``): smoothed means, covariances, gains."""
+
     def step(carry, inputs):
         next_mean, next_cov = carry
         k, m_f, P_f, m_p_next, P_p_next = inputs
@@ -116,6 +118,13 @@ def _rts_backward(model, filtered: FilterResult, throw: bool):
     _, (means, covs, gains) = jax.lax.scan(step, last, inputs, reverse=True)
     means = jnp.concatenate([means, last[0][None]])
     covs = jnp.concatenate([covs, last[1][None]])
+    return means, covs, gains
+
+
+@eqx.filter_jit
+def _rts_backward(model, filtered: FilterResult, throw: bool, scan: AbstractTimeScan = Sequential()):
+    # `scan` is resolved (Sequential or ParallelInTime); Sequential's pass is `_rts_scan`.
+    means, covs, gains = scan.smoother_pass(model, filtered)
     return _with_status(SmootherResult(means, covs, gains, filtered, filtered.ok), throw)
 
 
@@ -137,8 +146,9 @@ def rts_smoother(
     first_step: FirstStep = "update",
     nan_as_missing: bool = False,
     throw: bool = True,
+    scan: AbstractTimeScan = AutoScan(),
 ) -> SmootherResult:
-    r"""Rauch–Tung–Striebel smoother: a forward filter, then one reverse ``lax.scan``.
+    r"""Rauch–Tung–Striebel smoother: a forward filter, then one reverse scan (``lax.scan`` by default).
 
     .. math::
 
@@ -151,14 +161,21 @@ def rts_smoother(
     :class:`ExtendedKalmanFilter` it is the extended RTS smoother (Φ linearised at the filtered
     estimate). Arguments as :func:`run_filter`; ``throw=True`` (default) also raises at run time
     (``equinox``'s runtime error, whose message lists the likely causes) when a smoothed mean or
-    covariance is non-finite; with ``throw=False`` read :attr:`SmootherResult.ok`.
+    covariance is non-finite; with ``throw=False`` read :attr:`SmootherResult.ok`. ``scan``
+    traverses time in both passes: :class:`~jaxtrack.filters.Sequential` (two ``lax.scan``),
+    :class:`~jaxtrack.filters.ParallelInTime` (two associative scans, Särkkä & García-Fernández
+    2021; the ``KalmanFilter`` on a linear model) or :class:`~jaxtrack.filters.AutoScan`
+    (default: sequential on CPU); the result is the same.
 
     **Returns:** a :class:`SmootherResult` (``T`` steps, ``n`` states).
 
-    **Raises:** ``InputError`` as :func:`run_filter`; with ``throw=True`` a runtime error if the
-    forward or backward pass produced non-finite values (e.g. a singular predicted covariance).
+    **Raises:** ``InputError`` as :func:`run_filter` (a ``scan`` that does not apply included);
+    with ``throw=True`` a runtime error if the forward or backward pass produced non-finite values
+    (e.g. a singular predicted covariance).
     """
     filter = KalmanFilter() if filter is None else filter
+    measurements = jnp.asarray(measurements)
+    scan = resolve_scan(scan, filter, model, measurements.shape[0] if measurements.ndim else 0)
     filtered = run_filter(
         filter,
         model,
@@ -168,11 +185,12 @@ def rts_smoother(
         save="all",
         nan_as_missing=nan_as_missing,
         throw=throw,
+        scan=scan,
     )
     if filtered.filtered_mean.shape[0] == 1:
         empty = jnp.zeros((0,) + filtered.filtered_cov.shape[1:], filtered.filtered_cov.dtype)
         return SmootherResult(filtered.filtered_mean, filtered.filtered_cov, empty, filtered, filtered.ok)
-    return _rts_backward(model, filtered, throw)
+    return _rts_backward(model, filtered, throw, scan)
 
 
 def lag_one_covariances(result: SmootherResult) -> Float[Array, "Tm1 n n"]:

@@ -76,6 +76,9 @@ _PER_RUN_BLOCK = 512  # per-run covariance: (block, n, n) carries stay in cache
 # fixed cost per kernel is amortised over more runs in a wider block (3-member IMM, 8,192 × 200:
 # 0.42–0.46 M steps/s at 512, 0.53–0.60 at 2,048, 0.50 at 8,192).
 _IMM_BLOCK = 2048
+# A filter with `needs_key` (a particle filter) draws from fold_in(run key, _FILTER_STREAM): a stream
+# of its own, apart from the run's truth draws and detections. The constant is arbitrary (ASCII "filt").
+_FILTER_STREAM = 0x66696C74
 
 
 class _StepSums(NamedTuple):
@@ -168,8 +171,14 @@ def _per_run_block(filter, filter_model, truth, factors, observed, first_step, c
         return (filt, x, eps, ok), _masked_sums(use, error, nees, nis, axis=0, modes=modes)
 
     obs_axis = None if observed.ndim == 2 else 0
-    init_state = filter.init() if imm else filter.init(filter_model)
-    filt0 = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (block,) + a.shape), init_state)
+    if not imm and filter.needs_key:
+        # A filter that draws (a particle filter): run i's own key, fold_in(fold_in(key, i), tag),
+        # a stream apart from the run's truth draws (split) and detections (another tag).
+        run_keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(start + jnp.arange(block))
+        filt0 = jax.vmap(lambda k: filter.init(filter_model, key=jax.random.fold_in(k, _FILTER_STREAM)))(run_keys)
+    else:
+        init_state = filter.init() if imm else filter.init(filter_model)
+        filt0 = jax.tree_util.tree_map(lambda a: jnp.broadcast_to(a, (block,) + a.shape), init_state)
     ks = jnp.arange(observed.shape[0])
     init = (filt0, x0, eps0, jnp.ones((block,), bool))
     # Rematerialised step: under `grad` the backward pass recomputes a step from its carry
