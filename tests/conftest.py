@@ -101,14 +101,27 @@ def pytest_addoption(parser):
 # Scheduling for `pytest -n 2` (make test): each test module is one work unit of a worker (its
 # module fixtures are built once, on one worker), except the notebooks, one unit each; the
 # longest units are handed out first (collection order below, kept by --no-loadscope-reorder)
-# so that no worker is left alone with a long one at the end. A module missing from this list
-# only runs later. Order only, never selection. (xdist_group marks cannot do this here: xdist's
-# worker reads them in a collection hook that runs before this file's, and then sends every
-# test on its own, so a module fixture was built on both workers and torn down between tests.)
+# so that no worker is left alone with a long one at the end: every module of 15 s or more, in
+# the order of a profiled run (tools/suite_profile.py), so that each session ends on short
+# modules (alphabetical order had put the multi-target modules, 30-50 s each, at the end of the
+# first half). A module missing from this list only runs later. Order only, never selection.
+# (xdist_group marks cannot do this here: xdist's worker reads them in a collection hook that
+# runs before this file's, and then sends every test on its own, so a module fixture was built on
+# both workers and torn down between tests.)
 _LONG_FIRST = (
     "test_notebooks", "test_sharding", "test_performance_paths", "test_maneuvering", "test_mc_design",
-    "test_obem_registration", "test_bearings_tma", "test_calibration", "test_sensitivity", "test_rows_baseline",
-    "test_mc_gradient_ekf", "test_mc_gradient_memory",
+    "test_properties", "test_faults", "test_sensors", "test_nonlinear_filters",
+    "test_obem_registration", "test_square_root", "test_sar_navigation", "test_mc_gradient",
+    "test_sensitivity", "test_pcrlb", "test_mc_detections", "test_observer_design", "test_mc_imm",
+    "test_multitarget_learning", "test_motion_models", "test_radar_bias", "test_bearings_tma",
+    "test_particle_filter", "test_multitarget_study", "test_calibration", "test_imm_smoother",
+    "test_models", "test_learning_em", "test_rows_baseline", "test_design", "test_filters",
+    "test_smoother_singular", "test_parallel_kalman", "test_montecarlo", "test_reproduce_cli",
+    "test_multitarget_tracker", "test_imm", "test_imm_fit", "test_result_export",
+    "test_association_jpda", "test_learning_mle", "test_core_api", "test_tma_bounds",
+    "test_state_layouts", "test_learning_no_data", "test_learning_fit", "test_mc_gradient_memory",
+    "test_iterated_ekf", "test_cli", "test_filter_export", "test_montecarlo_summary", "test_figures",
+    "test_mc_gradient_ekf", "test_multitarget_scenario", "test_learning_params",
 )
 
 
