@@ -30,7 +30,7 @@ from ..models import AbstractStateSpaceModel
 from ._base import AbstractFilter, FirstStep, StepOutput
 from ._linalg import cholesky, cholesky_and_inverse, matmul
 from ._resampling import AbstractResampling, Systematic, effective_sample_size
-from ._updates import Conditioned, masked_noise, symmetrize
+from ._updates import Conditioned, gaussian_log_likelihood, masked_noise, symmetrize
 
 
 class ParticleState(eqx.Module):
@@ -112,10 +112,9 @@ def _log_densities(residuals: Array, R: Array, observed: Array) -> Array:
     particle. The factorisation is shared by all particles.
     """
     chol, chol_inv = cholesky_and_inverse(symmetrize(masked_noise(R, observed)))
-    white = residuals @ chol_inv.T
-    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
     num = jnp.sum(observed.astype(R.dtype))
-    return -0.5 * (jnp.sum(white * white, axis=-1) + log_det + num * math.log(2.0 * math.pi))
+    # The filters' own Gaussian log-density, one factorisation for all particles.
+    return jax.vmap(gaussian_log_likelihood, in_axes=(0, None, None, None))(residuals, chol, num, chol_inv)
 
 
 def _residuals(model, points: Array, z: Array, observed: Array, k) -> Array:
@@ -266,10 +265,8 @@ class LocallyOptimal(AbstractProposal):
         residuals = _residuals(model, fx, z, observed, k)  # z − H f_i
         eps = jax.random.normal(key, particles.shape, dtype)
         points = fx + residuals @ gain.T + eps @ L.T
-        white = residuals @ chol_inv.T
         num = jnp.sum(observed.astype(dtype))
-        log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(chol)))
-        log_inc = -0.5 * (jnp.sum(white * white, axis=-1) + log_det + num * math.log(2.0 * math.pi))
+        log_inc = jax.vmap(gaussian_log_likelihood, in_axes=(0, None, None, None))(residuals, chol, num, chol_inv)
         mean, spread = weighted_moments(fx, log_weights)
         return Proposed(points, log_inc, mean, symmetrize(spread + Q), residuals, HQHt)
 

@@ -47,7 +47,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..learning._params import Bounded, PositiveScalar
-from ._tracker import Tracker, _run_tracker
+from ._tracker import Tracker, _run_tracker, check_measurement_dim
 
 _NAMES = ("prob_detect", "clutter_density")
 
@@ -252,10 +252,7 @@ def fit_detection_and_clutter(
             "`measurements` must be (T, M, m) or (R, T, M, m) and `valid` boolean (T, M) or (R, T, M); "
             f"got {jnp.shape(measurements)} and {jnp.shape(valid)} ({jnp.asarray(valid).dtype})."
         )
-    if z.shape[-1] != tracker.model.meas_dim:
-        raise InputError(
-            f"`measurements` have {z.shape[-1]} components; the tracker's model measures {tracker.model.meas_dim}."
-        )
+    check_measurement_dim(tracker, z)
     if clutter_volume is None:
         if tracker.clutter_volume is None:
             raise InputError(

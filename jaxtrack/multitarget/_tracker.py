@@ -581,6 +581,15 @@ def _run_tracker(tracker, measurements, valid, save_cov):
     return TrackerResult(mean, cov, status, existence, track_id, beta, final, final.overflow, log_likelihood)
 
 
+def check_measurement_dim(tracker: "Tracker", measurements: Array) -> None:
+    """``InputError`` unless the last axis of ``measurements`` is the tracker model's ``m``."""
+    if measurements.shape[-1] != tracker.model.meas_dim:
+        raise InputError(
+            f"`measurements` have {measurements.shape[-1]} components; the tracker's model "
+            f"measures {tracker.model.meas_dim}."
+        )
+
+
 def run_tracker(
     tracker: Tracker,
     measurements: ArrayLike,
@@ -611,11 +620,7 @@ def run_tracker(
             "`measurements` must be (T, M, m) and `valid` (T, M); got "
             f"{measurements.shape} and {valid.shape}."
         )
-    if measurements.shape[-1] != tracker.model.meas_dim:
-        raise InputError(
-            f"`measurements` have {measurements.shape[-1]} components; the tracker's model "
-            f"measures {tracker.model.meas_dim}."
-        )
+    check_measurement_dim(tracker, measurements)
     result = _run_tracker(tracker, measurements, valid, save_cov)
     if warn and is_concrete(result.overflow) and bool(result.overflow):
         warnings.warn(
