@@ -129,3 +129,57 @@ def test_sweep_and_differentiable_paths_record_the_estimator():
     res = study(0.5)
     assert (res.filter_name, res.filter_model_name, res.filter_model_source) == (
         "KalmanFilter", "LinearGaussianModel", "given")
+
+
+def _per_run(filter, model, truth, key):
+    """Each run's error, NEES, NIS, its degrees of freedom and mode probabilities, by run_filter /
+    run_imm on simulate's runs (run i from fold_in(key, i)), kept whole by monte_carlo_map."""
+    from jaxtrack.filters import run_filter, run_imm
+    from jaxtrack.montecarlo import monte_carlo_map, normalized_squared_error, simulate
+
+    def one(k, _):
+        run = simulate(truth, k, STEPS)
+        if model is None:
+            res = run_imm(filter, run.measurements)
+            zero = jax.numpy.zeros(STEPS)
+            nis, dof, modes = zero, zero, res.mode_probs
+        else:
+            res = run_filter(filter, model, run.measurements)
+            nis = jax.vmap(normalized_squared_error)(res.innovation, res.innovation_cov)
+            dof, modes = res.num_observed.astype(nis.dtype), jax.numpy.zeros((STEPS, 0))
+        error = run.states - res.filtered_mean
+        return error, jax.vmap(normalized_squared_error)(error, res.filtered_cov), nis, dof, modes
+
+    return monte_carlo_map(one, key, RUNS, reduce="stack")
+
+
+@pytest.mark.parametrize("case", ["given", "imm"])
+def test_summarize_runs_equals_the_streamed_monte_carlo(results, case):
+    """summarize_runs of per-run statistics (one pass of monte_carlo_map, as the maneuvering study
+    uses it) = monte_carlo's streamed result on the same runs: every field to 1e-12."""
+    from jaxtrack.montecarlo import summarize_runs
+
+    truth, key = _cv(1.0), jax.random.key(7)
+    imm = InteractingMultipleModel([(KalmanFilter(), _cv(0.1)), (ExtendedKalmanFilter(), _cv(4.0))],
+                                   np.array([[0.9, 0.1], [0.1, 0.9]]))
+    flt, model = (KalmanFilter(), _cv(1e-3)) if case == "given" else (imm, None)
+    error, nees, nis, dof, modes = _per_run(flt, model, truth, key)
+    got = summarize_runs(error, nees, nis=nis, nis_dof=dof, mode_probs=modes if case == "imm" else None, key=key,
+                         filter=flt, filter_model=model)
+    ref = results[case]
+    for f in ("mse", "mean_error", "nees", "nees_std", "nees_bounds", "nis", "nis_dof", "nis_bounds", "anees",
+              "anees_bounds", "key"):
+        np.testing.assert_allclose(np.asarray(getattr(got, f)), np.asarray(getattr(ref, f)), rtol=1e-12, atol=1e-12,
+                                   err_msg=f)
+    if case == "imm":
+        np.testing.assert_allclose(got.mode_probs, ref.mode_probs, rtol=1e-12)
+    assert (got.num_runs, got.num_failed) == (ref.num_runs, 0)
+    assert [getattr(got, f) for f in ESTIMATOR_FIELDS] == [getattr(ref, f) for f in ESTIMATOR_FIELDS]
+    # A non-finite run is left out and counted, with monte_carlo's warning.
+    bad_error = np.array(error)
+    bad_error[3, 4, 0] = np.nan
+    with pytest.warns(RuntimeWarning, match="1 of 20 runs"):
+        bad = summarize_runs(bad_error, nees, nis=nis, nis_dof=dof)
+    assert (bad.num_runs, bad.num_failed) == (RUNS - 1, 1)
+    with pytest.raises(Exception, match="`nees`"):
+        summarize_runs(error, nees[:, :-1])

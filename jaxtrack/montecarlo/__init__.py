@@ -17,6 +17,7 @@ from ._run import (
     monte_carlo as monte_carlo,
     monte_carlo_sweep as monte_carlo_sweep,
 )
+from ._result import summarize_runs as summarize_runs
 from ._sharding import run_mesh as run_mesh, sweep_mesh as sweep_mesh
 from ._simulate import (
     Trajectory as Trajectory,
@@ -40,6 +41,7 @@ __all__ = [
     "MonteCarloResult",
     "monte_carlo",
     "monte_carlo_sweep",
+    "summarize_runs",
     "run_mesh",
     "sweep_mesh",
     "Trajectory",

@@ -2,20 +2,23 @@
 
 :class:`_Sums` is what every block of runs adds to (per-step sums over runs, nothing per run);
 :func:`_summarize` turns the totals into a :class:`MonteCarloResult` with χ² bounds
-(:func:`~jaxtrack.montecarlo.chi2_mean_bounds`).
+(:func:`~jaxtrack.montecarlo.chi2_mean_bounds`); :func:`summarize_runs` does the same from
+statistics kept per run.
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, UInt32
+from jaxtyping import Array, ArrayLike, Float, UInt32
 
 from .._export import Exportable
+from .._validation import InputError
 from ..filters import InteractingMultipleModel
 from ..models import TrackingModel
 from ._metrics import chi2_mean_bounds
@@ -291,6 +294,71 @@ def _summarize(sums: _Sums, n, confidence, shared=False, components=None, key=No
         filter_model_name=filter_model_name,
         filter_model_source=filter_model_source,
     )
+
+
+def summarize_runs(
+    error: ArrayLike,
+    nees: ArrayLike,
+    *,
+    nis: ArrayLike | None = None,
+    nis_dof: ArrayLike | None = None,
+    mode_probs: ArrayLike | None = None,
+    ok: ArrayLike | None = None,
+    confidence: float = 0.95,
+    components: Sequence[int] | None = None,
+    key=None,
+    filter=None,
+    filter_model=None,
+) -> MonteCarloResult:
+    """The :class:`MonteCarloResult` of per-run statistics kept whole, as :func:`monte_carlo` makes it.
+
+    For a Monte Carlo that :func:`monte_carlo` cannot run in one go (an estimator beside the
+    filter that needs the whole run, such as a smoother, in the same pass of
+    :func:`~jaxtrack.montecarlo.monte_carlo_map`): return each run's error, NEES, NIS (and an
+    IMM's mode probabilities) from the run function with ``reduce="stack"``, and summarise them
+    here with the same formulas and χ² bounds (:func:`_summarize`), so one pass gives both the
+    per-run errors (paired intervals) and the streamed statistics.
+
+    **Arguments** (``M`` runs, ``T`` steps, ``n`` scored components):
+
+    - ``error`` ``(M, T, n)``: ``x − x̂_{k/k}`` on the scored components; ``nees`` ``(M, T)``.
+    - ``nis`` ``(M, T)`` and ``nis_dof`` ``(M, T)`` (each run's observed components per step), or
+      None for none scored (an IMM: 0 with 0 degrees of freedom).
+    - ``mode_probs`` ``(M, T, K)`` or None; ``ok`` ``(M,)`` bool (None: all): runs with False, or
+      with a non-finite value, are left out and counted in ``num_failed``, as in :func:`monte_carlo`.
+    - ``confidence``; ``components`` (the filter indices ``error`` holds); ``key`` (the study's
+      PRNG key, recorded); ``filter``, ``filter_model``: the estimator and its model, recorded by
+      name (``filter_model`` None: the IMM's own, or not recorded).
+
+    **Returns:** a :class:`MonteCarloResult` (``shared_covariance`` False).
+    """
+    error = jnp.asarray(error)
+    nees = jnp.asarray(nees, error.dtype)
+    if error.ndim != 3 or nees.shape != error.shape[:2]:
+        raise InputError(f"`error` must be (M, T, n) and `nees` (M, T); got {error.shape} and {nees.shape}.")
+    M, T, n = error.shape
+    zeros = jnp.zeros((M, T), error.dtype)
+    nis = zeros if nis is None else jnp.asarray(nis, error.dtype)
+    nis_dof = zeros if nis_dof is None else jnp.asarray(nis_dof, error.dtype)
+    for name, value in (("nis", nis), ("nis_dof", nis_dof)):
+        if value.shape != (M, T):
+            raise InputError(f"`{name}` must be (M, T) = {(M, T)}; got {value.shape}.")
+    modes = jnp.zeros((M, T, 0), error.dtype) if mode_probs is None else jnp.asarray(mode_probs, error.dtype)
+    if modes.shape[:2] != (M, T) or modes.ndim != 3:
+        raise InputError(f"`mode_probs` must be (M, T, K); got {modes.shape}.")
+    use = jnp.ones((M,), bool) if ok is None else jnp.asarray(ok, bool).reshape(M)
+    use = use & jnp.all(jnp.isfinite(error), axis=(1, 2)) & jnp.all(jnp.isfinite(nees), axis=1) \
+        & jnp.all(jnp.isfinite(nis), axis=1)
+    # Excluded runs are zeroed, not weighted: NaN·0 is NaN.
+    w = lambda x: jnp.sum(jnp.where(use.reshape((M,) + (1,) * (x.ndim - 1)), x, 0.0), axis=0)  # noqa: E731
+    sums = _Sums(w(error), w(error * error), w(nees), w(nees * nees), w(nis), jnp.sum(use).astype(error.dtype),
+                 jnp.sum(~use).astype(error.dtype), w(nis_dof), w(modes))
+    if filter is not None and filter_model is None and not isinstance(filter, InteractingMultipleModel):
+        raise InputError("`filter_model` is needed with `filter` (the model the filter ran), except for an IMM.")
+    fields = {} if filter is None else _estimator_fields(filter, filter_model, filter_model is not None)
+    keys = {} if key is None else _key_fields(key)
+    return _summarize(sums, n, confidence, False, None if components is None else tuple(components), **keys,
+                      **fields)
 
 
 def _key_fields(key) -> dict:
