@@ -41,9 +41,13 @@ def _result(proc):
     return json.loads(out.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform != "linux", reason="ru_maxrss in KiB (Linux)")
 def test_gradient_peak_memory_does_not_grow_with_runs():
     """10⁴ vs 10³ runs × 200 steps (blocks of 512: 20 vs 2 blocks), both processes at once.
+
+    Behind --runslow: a memory target, which ``benchmarks/mc_gradient.py`` reports (peak RSS) in
+    the default workflow; here it took 21 s of one worker with two more processes on 2 cores.
 
     Without checkpointing the reverse pass keeps every block's per-step residuals, O(M·T): ~15 MB
     per block of 512 × 200 here, +300 MB at 10⁴ runs. With it only the totals at each block
