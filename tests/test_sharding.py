@@ -30,9 +30,19 @@ WORKER = Path(__file__).with_name("_sharded_worker.py")
 KEY = jax.random.key(3)
 
 
-def start_worker(*args, cases=None):
+def worker_env():
+    """This process's environment for a sharded subprocess, without any device-count XLA flag (the
+    worker sets its own device count) but with the rest (the suite's optimisation level: the
+    statistics are compared bit for bit with this process's)."""
     env = dict(os.environ)
-    env.pop("XLA_FLAGS", None)
+    flags = [f for f in env.pop("XLA_FLAGS", "").split() if "device_count" not in f]
+    if flags:
+        env["XLA_FLAGS"] = " ".join(flags)
+    return env
+
+
+def start_worker(*args, cases=None):
+    env = worker_env()
     if cases is not None:
         env["JAXTRACK_SHARDED_CASES"] = ",".join(cases)
     return subprocess.Popen([sys.executable, str(WORKER), *map(str, args)], stdout=subprocess.PIPE,
@@ -152,8 +162,7 @@ def test_cli_demo_across_two_processes_matches_one(tmp_path):
     the single-process table; process 1 prints nothing and writes nothing."""
     args = ["demo", "--runs", "300", "--steps", "20", "--json", "--no-progress"]
     coordinator = f"127.0.0.1:{free_port()}"
-    env = dict(os.environ)
-    env.pop("XLA_FLAGS", None)
+    env = worker_env()
     procs = [
         subprocess.Popen([sys.executable, "-m", "jaxtrack.cli", *args, "--out", str(tmp_path / f"p{i}"),
                           "--devices", "1", "--coordinator", coordinator, "--num-processes", "2",
