@@ -29,7 +29,13 @@ Contenders:
    It is a Python loop of object-heavy steps; with ``--ss-steps`` smaller than ``T`` it is timed on
    the first ``--ss-steps`` steps only and reported per particle-step (said so in the output).
 
-cuthbert (the issue's other peer) is not installed here: it is not measured.
+4. **cuthbert** (the ``bench`` extra; skipped with a line saying so when it is not installed):
+   ``cuthbert.smc.particle_filter.build_filter`` with the same prior, transition and Gaussian
+   log-potential, ``cuthbertlib.resampling.systematic.resampling`` at every step (cuthbert
+   resamples at the start of each step, before propagating), run by ``cuthbert.filter`` under
+   ``jax.jit``; one run and the same ``jax.vmap`` batch as jaxtrack. Its estimate is the weighted
+   mean of each step's particles. Its CPU inverse CDF is a Numba callback from inside the jitted
+   program.
 
 Each time is the best of ``--repeats`` interleaved rounds after a warm-up of every contender.
 Agreement check (asserted): every filter's final position error is finite and its position RMSE
@@ -175,6 +181,40 @@ def stone_soup_pf(setup, num_particles: int, seed: int = 2):
 # ------------------------------------------------------------------------------------------------
 
 
+def cuthbert_pf(model, zs, num_particles: int):
+    """cuthbert's bootstrap particle filter on ``model`` (None when cuthbert is not installed):
+    ``(one_run(key) -> (T, 4) means, compile seconds)``."""
+    try:
+        import cuthbert
+        from cuthbert.smc import particle_filter
+        from cuthbertlib.resampling import systematic
+    except ImportError:
+        return None
+    F, Q, H, R = (jnp.asarray(a) for a in (model.F, model.Q, model.H, model.R))
+    m0, chol_p0, chol_q = model.initial_mean, jnp.linalg.cholesky(model.initial_cov), jnp.linalg.cholesky(Q)
+    r_inv = jnp.linalg.inv(R)
+
+    def init_sample(key):
+        return m0 + chol_p0 @ jax.random.normal(key, m0.shape, m0.dtype)
+
+    def propagate(key, x, z):
+        return F @ x + chol_q @ jax.random.normal(key, x.shape, x.dtype)
+
+    def log_potential(x_prev, x, z):
+        r = z - H @ x
+        return -0.5 * r @ r_inv @ r
+
+    pf = particle_filter.build_filter(init_sample, propagate, log_potential, num_particles, systematic.resampling)
+
+    def one_run(key):
+        k0, k1 = jax.random.split(key)
+        states = cuthbert.filter(pf, zs, pf.init_prepare(key=k0), key=k1)
+        w = jax.nn.softmax(states.log_weights, axis=-1)
+        return jnp.einsum("tn,tnd->td", w, states.particles)[1:]  # entry 0 is the prior
+
+    return one_run
+
+
 def timed(fn) -> float:
     t = time.perf_counter()
     jax.block_until_ready(fn())
@@ -211,6 +251,17 @@ def bench(num_particles: int, num_steps: int, num_runs: int, ss_particles: int, 
         "FilterPy loop": (lambda: filterpy_pf(F, Q, zs_np, num_particles), num_particles * num_steps),
         "Stone Soup": (lambda: stone_soup_pf(ss_setup, ss_particles), ss_particles * ss_steps),
     }
+    cb_run = cuthbert_pf(model, zs, num_particles)
+    cb_compile = {}
+    if cb_run is not None:
+        t = time.perf_counter()
+        cb_single = jax.jit(cb_run).lower(key).compile()
+        cb_compile["one run"] = time.perf_counter() - t
+        t = time.perf_counter()
+        cb_batched = jax.jit(jax.vmap(cb_run)).lower(keys).compile()
+        cb_compile["batch"] = time.perf_counter() - t
+        contenders["cuthbert"] = (lambda: cb_single(key), num_particles * num_steps)
+        contenders["cuthbert batch"] = (lambda: cb_batched(keys), num_runs * num_particles * num_steps)
     # Warm-up of every contender; these results are the ones checked.
     outputs = {name: np.asarray(jax.block_until_ready(fn())) for name, (fn, _) in contenders.items()}
     best = {name: np.inf for name in contenders}
@@ -232,6 +283,10 @@ def bench(num_particles: int, num_steps: int, num_runs: int, ss_particles: int, 
         "Stone Soup": (position_rmse(outputs["Stone Soup"], truth[:ss_steps]),
                        final_error(outputs["Stone Soup"], truth[:ss_steps]), kf_rmse_ss),
     }
+    if cb_run is not None:
+        check["cuthbert"] = (position_rmse(outputs["cuthbert"], truth), final_error(outputs["cuthbert"], truth), kf_rmse)
+        check["cuthbert batch"] = (float(np.mean([position_rmse(m, truth) for m in outputs["cuthbert batch"]])),
+                                   float(np.mean([final_error(m, truth) for m in outputs["cuthbert batch"]])), kf_rmse)
     for name, (rmse, final, reference) in check.items():
         assert np.isfinite(final) and np.isfinite(rmse), (name, rmse, final)
         assert reference / 2 <= rmse <= 2 * reference, (name, rmse, reference)
@@ -244,6 +299,9 @@ def bench(num_particles: int, num_steps: int, num_runs: int, ss_particles: int, 
         "speed_up_vs_stone_soup": rate["jaxtrack"] / rate["Stone Soup"],
         "batch_speed_up_vs_filterpy": rate["jaxtrack batch"] / rate["FilterPy loop"],
         "batch_speed_up_vs_stone_soup": rate["jaxtrack batch"] / rate["Stone Soup"],
+        "cuthbert_compile_s": cb_compile,
+        "speed_up_vs_cuthbert": rate["jaxtrack"] / rate["cuthbert"] if cb_run is not None else None,
+        "batch_speed_up_vs_cuthbert": rate["jaxtrack batch"] / rate["cuthbert batch"] if cb_run is not None else None,
         "check": {name: {"position_rmse_m": v[0], "final_position_error_m": v[1], "kalman_rmse_m": v[2]}
                   for name, v in check.items()},
     }
@@ -284,9 +342,13 @@ def main():
             ("jaxtrack (jit ∘ vmap batch)", "jaxtrack batch", args.particles, args.steps, runs),
             ("FilterPy loop (NumPy)", "FilterPy loop", args.particles, args.steps, 1),
             ("Stone Soup", "Stone Soup", ss_particles, ss_steps, 1))
+    if "cuthbert" in rate:
+        rows += (("cuthbert (jit, one run)", "cuthbert", args.particles, args.steps, 1),
+                 ("cuthbert (jit ∘ vmap batch)", "cuthbert batch", args.particles, args.steps, runs))
     for label, key, n, t, r in rows:
         print(f"  {label:30s}{n:7d}{t:6d}{r:6d}{best[key] * 1e3:9.2f} ms{rate[key]:19.3e}")
-    print("  cuthbert                      not installed: not measured")
+    if "cuthbert" not in rate:
+        print("  cuthbert                      not installed (pip install -c requirements.lock -e '.[bench]'): not measured")
     if ss_steps < args.steps or ss_particles != args.particles:
         print(f"  (Stone Soup timed on {ss_particles} particles × {ss_steps} steps, reported per particle-step)")
     print(f"\n  jaxtrack compilation (once): one run {row['compile_s']:.2f} s, batch of {runs} "
@@ -295,6 +357,11 @@ def main():
           f"batch {row['batch_speed_up_vs_filterpy']:8.1f}×")
     print(f"  jaxtrack / Stone Soup:     one run {row['speed_up_vs_stone_soup']:8.1f}×   "
           f"batch {row['batch_speed_up_vs_stone_soup']:8.1f}×   (issue target ≥ 100×)")
+    if row["speed_up_vs_cuthbert"] is not None:
+        cc = row["cuthbert_compile_s"]
+        print(f"  jaxtrack / cuthbert:       one run {row['speed_up_vs_cuthbert']:8.2f}×   "
+              f"batch {row['batch_speed_up_vs_cuthbert']:8.2f}×   (issue target ≥ 1×; cuthbert compiles in "
+              f"{cc['one run']:.2f} s / {cc['batch']:.2f} s)")
     print("\n  agreement (same truth and measurements; asserted: finite, RMSE within 2× of the Kalman filter's)")
     print(f"  {'':30s}{'position RMSE':>15s}{'final error':>13s}{'Kalman RMSE':>13s}")
     for name, v in row["check"].items():

@@ -33,7 +33,7 @@ import pytest
 
 from jaxtrack import InputError
 from jaxtrack.filters import FilterResult, KalmanFilter, run_filter, run_filter_batch
-from jaxtrack.filters._particle import Bootstrap, LocallyOptimal, ParticleFilter, ParticleState
+from jaxtrack.filters._particle import Bootstrap, LocallyOptimal, ParticleFilter, ParticleState, Regularization
 from jaxtrack.filters._resampling import StopGradientResampling, Systematic
 from jaxtrack.models import ConstantVelocity, RangeBearing, TrackingModel, constant_velocity
 from jaxtrack.montecarlo import monte_carlo, simulate
@@ -320,6 +320,45 @@ def test_gaussian_methods_and_bad_arguments_raise():
             ParticleFilter(**bad)
     assert ParticleFilter.needs_key and not KalmanFilter.needs_key
     assert not pf.covariance_is_data_free(MODEL)
+    for bad in (0.0, -1.0, float("nan"), True, "1"):
+        with pytest.raises(InputError, match="scale"):
+            Regularization(bad)
+    with pytest.raises(InputError, match="regularization"):
+        ParticleFilter(8, regularization=1.0)
+
+
+# -- the regularised move: no plant noise ----------------------------------------------------------
+
+
+def test_regularization_keeps_the_cloud_where_resampling_alone_collapses():
+    """Q = 0 (a constant-velocity target without noise): resampling at every step only copies
+    particles, so without the move the cloud collapses onto one point and the filter stops
+    following the data; with Musso et al.'s bandwidth it keeps a spread of the Kalman filter's
+    (the exact posterior's) size and stays near its mean. 20 runs × N = 400 over 30 steps, last
+    step. Measured: covariance trace PF/KF (median over runs) 3e-24 without the move, 1.99 with
+    it (the kernel adds h² P at each resampling, h = 0.37 here); RMS error of the mean 57 KF σ
+    without, 2.5 with. The price of the move is that inflation and a bias of a few σ: it is for
+    models where the plain filter degenerates, not a free improvement."""
+    model = build(jnp.array([0.5, 0.0]), prior=jnp.diag(jnp.array([100.0, 25.0])))
+    z = simulate(model, jax.random.key(8), 30).measurements
+    kf = run_filter(KalmanFilter(), model, z)
+    assert Regularization().bandwidth(4, 1000) == pytest.approx((4 / 6) ** 0.125 * 1000 ** -0.125, rel=1e-15)
+
+    def runs(reg):
+        pf = lambda k: ParticleFilter(400, ess_threshold=1.0, regularization=reg, key=k)  # noqa: E731
+        return jax.jit(jax.vmap(lambda k: run_filter(pf(k), model, z, throw=False)))(_keys(9, 20))
+
+    tr_kf = float(jnp.trace(kf.filtered_cov[-1]))
+    sd = jnp.sqrt(jnp.diagonal(kf.filtered_cov[-1]))
+    stats = {}
+    for name, reg in (("plain", None), ("regularised", Regularization())):
+        r = runs(reg)
+        ratio = float(jnp.median(jnp.trace(r.filtered_cov[:, -1], axis1=-2, axis2=-1))) / tr_kf
+        err = (r.filtered_mean[:, -1] - kf.filtered_mean[-1][None]) / sd[None]
+        stats[name] = (ratio, float(jnp.sqrt(jnp.mean(err**2))))
+    assert stats["plain"][0] < 1e-6 and stats["plain"][1] > 20, stats
+    assert 0.5 < stats["regularised"][0] < 3.0, stats
+    assert stats["regularised"][1] < 4.0 and stats["regularised"][1] < 0.1 * stats["plain"][1], stats
 
 
 # -- the particles library's bootstrap filter, on the same record ----------------------------------

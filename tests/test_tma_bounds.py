@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 
 from jaxtrack.applications.bearings_tma import bounds as tb
+from jaxtrack.applications.bearings_tma import figure_bounds
 from jaxtrack.applications.bearings_tma import geometry
 from jaxtrack.bounds import pcrlb, pcrlb_along
+from jaxtrack.montecarlo import monte_carlo_map, simulate
 
 RUNS = 300  # CI size; the reproduction uses 2000
 
@@ -87,3 +89,47 @@ def test_ekf_mse_not_below_pcrlb_2000_runs(name):
     for mse, se in ((c.ekf_mse, c.ekf_se_mean), (c.plkf_mse, c.plkf_se_mean)):
         mse, se = np.asarray(mse), np.asarray(se)
         assert np.all(mse >= b - 3.5 * np.sqrt(se**2 + sd_b**2))
+
+
+PF_PARTICLES = 1000
+
+
+def test_particle_filter_is_efficient_where_the_ekf_is_not():
+    """Issue 34: the regularised particle filter (``bounds.particle_filter``: bootstrap, the
+    bound's own prior, Musso et al.'s move, since the model has no plant noise) on R1's truths.
+
+    Where the EKF is inefficient (240 s, end of leg 1: EKF RMSE 12.9× the PCRLB) the particle
+    filter is at 1.84× the PCRLB, and that factor is the bound's own slack, not the filter's: the
+    PCRLB averages the Fisher information over truths before inverting it, E[J]⁻¹, which is below
+    the mean of the per-truth bounds E[J(x)⁻¹] (Jensen; no plant noise keeps each truth's
+    information apart) by 1.70× at 240 s and 2.01× at 960 s (R3: 4.6× at 960 s). So "PF RMSE /
+    PCRLB ≤ 1.1" (the issue's wording) cannot be met by any estimator whose MSE is near the
+    per-truth bounds; it is tested against the mean per-truth bound (``pcrlb_along`` of each
+    truth) instead. Measured, 300 runs, N = 1000: PF / per-truth bound 1.08 at 240 s, at most 1.26
+    over the 49 steps (N = 2000, 200 runs: 1.06 and 1.17); the Monte Carlo error of the ratio is
+    about ±0.05 (1σ)."""
+    name, key = "R1", jax.random.key(11)
+    c = tb.bound_comparison(name, key, RUNS, particles=PF_PARTICLES)
+    model = tb.bound_model(geometry(name))
+
+    def per_truth(k, _):
+        b = pcrlb_along(model, simulate(model, k).states).bound
+        return b[:, 0, 0] + b[:, 1, 1]
+
+    per_truth_bound = np.asarray(monte_carlo_map(per_truth, key, RUNS, reduce="stack")).mean(axis=0)
+    k240 = int(np.argmin(np.abs(np.asarray(c.times) - 240.0)))
+    pf, ekf = np.asarray(c.efficiency("pf")), np.asarray(c.efficiency("ekf"))
+    tight = np.sqrt(np.asarray(c.pf_mse) / per_truth_bound)
+    print(f"R1 at 240 s: PF/PCRLB {pf[k240]:.3f}, EKF/PCRLB {ekf[k240]:.2f}, PF/per-truth {tight[k240]:.3f}; "
+          f"max PF/per-truth {tight.max():.3f}; Jensen gap {np.sqrt(per_truth_bound / np.asarray(c.position_bound))[[k240, -1]]}")
+    assert pf[k240] < 0.2 * ekf[k240]
+    assert tight[k240] <= 1.1 and tight.max() <= 1.3, (tight[k240], tight.max())
+    # The PCRLB holds for the particle filter too (same 3.5-σ rule as the EKF and the PLKF above).
+    se = np.asarray(c.pf_se_mean)
+    assert np.all(np.asarray(c.pf_mse) >= np.asarray(c.position_bound) - 3.5 * se)
+    assert "PF RMSE" in tb.bound_table([c]) and c.num_particles == PF_PARTICLES
+    import matplotlib
+
+    matplotlib.use("Agg")
+    fig = figure_bounds([c])
+    assert any("particle filter" in t.get_text() for t in fig.axes[0].get_legend().get_texts())

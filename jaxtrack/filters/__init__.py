@@ -74,6 +74,7 @@ from ._particle import (
     LocallyOptimal as LocallyOptimal,
     ParticleFilter as ParticleFilter,
     ParticleState as ParticleState,
+    Regularization as Regularization,
 )
 from ._resampling import (
     AbstractResampling as AbstractResampling,
@@ -140,6 +141,7 @@ __all__ = [
     "LocallyOptimal",
     "ParticleFilter",
     "ParticleState",
+    "Regularization",
     "AbstractResampling",
     "AbstractResamplingScheme",
     "Multinomial",

@@ -38,6 +38,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ...bounds import PosteriorCRB, pcrlb
+from ...filters import ParticleFilter, Regularization, run_filter
 from ...design import (
     ObserverDesign,
     bearing_position_bound,
@@ -52,6 +53,7 @@ from .scenario import AVERAGED_BEARING_STD, SAMPLE_PERIOD, SPEED, TURN_RATE, Sce
 PRIOR_POSITION_STD = 250.0  # m: σ of the prior on each relative position component (stated; not in the report)
 PRIOR_VELOCITY_STD = 0.5  # m/s: σ of the prior on each relative velocity component
 FILTER_INITIAL_RANGE = 10_000.0  # m: the EKF's and the PLKF's r̂_s(0) (the study's Fig. 6 guess)
+PF_STREAM = 0x5046  # fold_in tag of a run's particle-filter key (apart from its truth draws)
 
 
 def prior_cov(position_std: float = PRIOR_POSITION_STD, velocity_std: float = PRIOR_VELOCITY_STD) -> Array:
@@ -84,16 +86,27 @@ class BayesMonteCarlo(eqx.Module):
     """Per-run squared position errors on truths drawn from the bound's prior (:func:`bayes_monte_carlo`).
 
     ``ekf_se`` / ``plkf_se``: ``(N, K+1)`` ``‖r̂_R(k|k) − r_R(k)‖²`` (m²) of the EKF and the PLKF;
-    ``ekf_ok`` ``(N,)``: False where the EKF went non-finite (its errors are then ``inf``).
+    ``ekf_ok`` ``(N,)``: False where the EKF went non-finite (its errors are then ``inf``);
+    ``pf_se`` ``(N, K+1)``: the particle filter's (None when not run).
     """
 
     ekf_se: Float[Array, "N K1"]
     plkf_se: Float[Array, "N K1"]
     ekf_ok: Array
+    pf_se: Float[Array, "N K1"] | None = None
+
+
+def particle_filter(num_particles: int) -> ParticleFilter:
+    """The study's particle filter: bootstrap, systematic resampling below ESS N/2, and the
+    regularised move (:class:`~jaxtrack.filters.Regularization`, Musso et al.'s bandwidth) that a
+    model without plant noise needs (resampling alone would leave copies that never spread again).
+    It runs on the bound's own model and prior (:func:`bound_model`): the information the PCRLB
+    assumes, which the EKF (Appendix D prior, ``r̂(0)`` = 10 km) and the PLKF do not use."""
+    return ParticleFilter(num_particles, regularization=Regularization())
 
 
 def _bayes_run(key, args):
-    model, vo0, filter_std, r0 = args
+    model, vo0, filter_std, r0, pf = args
     traj = simulate(model, key)  # run i: the truths pcrlb(model, key, N) averages over
     beta = traj.measurements[:, 0]
     u = model.observer_input[1:]
@@ -106,12 +119,17 @@ def _bayes_run(key, args):
         return jnp.sum((mean[:, :2] - traj.states[:, :2]) ** 2, axis=-1)
 
     ekf_se = jnp.where(ekf.ok, se(ekf.mean), jnp.inf)
-    return ekf_se, se(plkf.mean), ekf.ok
+    if pf is None:
+        return ekf_se, se(plkf.mean), ekf.ok
+    pf = eqx.tree_at(lambda f: f.key, pf, jax.random.fold_in(key, PF_STREAM))
+    res = run_filter(pf, model, traj.measurements, save="mean", throw=False)
+    return ekf_se, se(plkf.mean), ekf.ok, jnp.where(res.ok, se(res.filtered_mean), jnp.inf)
 
 
 def bayes_monte_carlo(model: RelativeBearingModel, observer_velocity0, key, num_runs: int, *,
                       filter_std: float = AVERAGED_BEARING_STD,
-                      initial_range: float = FILTER_INITIAL_RANGE) -> BayesMonteCarlo:
+                      initial_range: float = FILTER_INITIAL_RANGE,
+                      particles: int | None = None) -> BayesMonteCarlo:
     """The study's EKF (Appendix D prior) and Table 2 PLKF on truths drawn from ``model``'s prior.
 
     Run ``i`` is ``simulate(model, fold_in(key, i))`` (truth and bearings), on
@@ -120,15 +138,20 @@ def bayes_monte_carlo(model: RelativeBearingModel, observer_velocity0, key, num_
 
     **Arguments:** ``model``: e.g. :func:`bound_model`; ``observer_velocity0``: ``(2,)`` m/s (the
     EKF prior's velocity, Appendix D); ``key``; ``num_runs``; ``filter_std``: the filters' σ_ν
-    (rad); ``initial_range``: both filters' ``r̂_s(0)`` (m).
+    (rad); ``initial_range``: both filters' ``r̂_s(0)`` (m); ``particles``: None, or run
+    :func:`particle_filter` with this many particles too (on ``model`` itself, each run with its own
+    key ``fold_in(run key, PF_STREAM)``).
 
     **Returns:** :class:`BayesMonteCarlo`.
     """
     dtype = model.initial_mean.dtype
+    pf = None if particles is None else particle_filter(particles)
     args = (model, jnp.asarray(observer_velocity0, dtype), jnp.asarray(filter_std, dtype),
-            jnp.asarray(initial_range, dtype))
-    ekf_se, plkf_se, ok = monte_carlo_map(_bayes_run, key, num_runs, args=args, reduce="stack")
-    return BayesMonteCarlo(jnp.asarray(ekf_se), jnp.asarray(plkf_se), jnp.asarray(ok))
+            jnp.asarray(initial_range, dtype), pf)
+    # Blocks of 16 runs with a particle filter (16 × N particles at once), else one block.
+    block = {} if pf is None else {"block_size": 16}
+    out = monte_carlo_map(_bayes_run, key, num_runs, args=args, reduce="stack", **block)
+    return BayesMonteCarlo(*(jnp.asarray(a) for a in out))
 
 
 class BoundComparison(eqx.Module):
@@ -139,6 +162,8 @@ class BoundComparison(eqx.Module):
     - ``ekf_mse``, ``plkf_mse`` ``(K+1,)`` m² and ``ekf_se_mean``, ``plkf_se_mean`` ``(K+1,)`` m²,
       their standard errors (per-run spread / √N); ``ekf_ok`` ``()`` the fraction of finite EKF runs.
     - ``num_runs``: Monte Carlo runs (the bound averages over the same truths).
+    - ``pf_mse``, ``pf_se_mean`` ``(K+1,)`` m²: the particle filter's (:func:`particle_filter`), None
+      when it was not run; ``num_particles`` (0 when not run).
     """
 
     name: str = eqx.field(static=True)
@@ -151,10 +176,16 @@ class BoundComparison(eqx.Module):
     plkf_se_mean: Float[Array, " K1"]
     ekf_ok: Float[Array, ""]
     num_runs: int = eqx.field(static=True)
+    pf_mse: Float[Array, " K1"] | None = None
+    pf_se_mean: Float[Array, " K1"] | None = None
+    num_particles: int = eqx.field(static=True, default=0)
 
     def efficiency(self, which: str = "ekf") -> Array:
-        """RMSE / √bound per step (≥ 1 up to Monte Carlo error), ``(K+1,)``; ``which``: ``"ekf"`` or ``"plkf"``."""
-        mse = self.ekf_mse if which == "ekf" else self.plkf_mse
+        """RMSE / √bound per step (≥ 1 up to Monte Carlo error), ``(K+1,)``; ``which``: ``"ekf"``,
+        ``"plkf"`` or ``"pf"`` (when the particle filter ran)."""
+        mse = {"ekf": self.ekf_mse, "plkf": self.plkf_mse, "pf": self.pf_mse}[which]
+        if mse is None:
+            raise ValueError("no particle filter in this comparison: pass `particles` to bound_comparison.")
         return jnp.sqrt(mse / self.position_bound)
 
 
@@ -163,25 +194,29 @@ def _mean_and_se(se):
     return se.mean(0), se.std(0, ddof=1) / math.sqrt(se.shape[0])
 
 
-def bound_comparison(name: str, key, num_runs: int, *, bearing_std: float = AVERAGED_BEARING_STD) -> BoundComparison:
+def bound_comparison(name: str, key, num_runs: int, *, bearing_std: float = AVERAGED_BEARING_STD,
+                     particles: int | None = None) -> BoundComparison:
     """The PCRLB of geometry ``name`` and the EKF's and PLKF's Monte Carlo position MSE on the same truths.
 
     **Arguments:** ``name``: ``"R1"``, ``"R2"`` or ``"R3"``; ``key``; ``num_runs`` (the bound and
     the Monte Carlo use the same ``num_runs`` truths); ``bearing_std``: σ_ν of both the
-    simulation and the filters (config A), rad.
+    simulation and the filters (config A), rad; ``particles``: None, or also run
+    :func:`particle_filter` with this many particles on the same truths.
 
     **Returns:** :class:`BoundComparison`.
     """
     s = geometry(name)
     model = bound_model(s, bearing_std=bearing_std)
     crb = pcrlb(model, key, num_runs)
-    mc = bayes_monte_carlo(model, s.observer[0, 2:], key, num_runs, filter_std=bearing_std)
+    mc = bayes_monte_carlo(model, s.observer[0, 2:], key, num_runs, filter_std=bearing_std, particles=particles)
     ok = np.asarray(mc.ekf_ok)
     e_m, e_s = _mean_and_se(mc.ekf_se)
     p_m, p_s = _mean_and_se(mc.plkf_se)
+    f_m, f_s = (None, None) if mc.pf_se is None else (jnp.asarray(a) for a in _mean_and_se(mc.pf_se))
     pos = crb.bound[:, 0, 0] + crb.bound[:, 1, 1]
     return BoundComparison(name, s.times, crb, pos, jnp.asarray(e_m), jnp.asarray(e_s), jnp.asarray(p_m),
-                           jnp.asarray(p_s), jnp.asarray(ok.mean()), int(num_runs))
+                           jnp.asarray(p_s), jnp.asarray(ok.mean()), int(num_runs), f_m, f_s,
+                           0 if particles is None else int(particles))
 
 
 def bound_table(comparisons, times=(240.0, 480.0, 720.0, 960.0)) -> str:
@@ -189,24 +224,35 @@ def bound_table(comparisons, times=(240.0, 480.0, 720.0, 960.0)) -> str:
 
     **Arguments:** ``comparisons``: :class:`BoundComparison` s; ``times``: sample instants (s).
 
-    **Returns:** the table (str): the position RMSE bound, the EKF's and PLKF's RMSE ± 2 s.e. (m)
-    and the EKF's efficiency RMSE/√bound.
+    **Returns:** the table (str): the position RMSE bound, the EKF's, PLKF's (and the particle
+    filter's, when run) RMSE ± 2 s.e. (m) and their efficiencies RMSE/√bound.
     """
+    pf = any(c.pf_mse is not None for c in comparisons)
+    head = f"{'geometry':>8} {'t [s]':>6} {'PCRLB':>9} {'EKF RMSE':>18} {'PLKF RMSE':>18}"
+    head += f" {'PF RMSE':>18} {'EKF eff.':>9} {'PF eff.':>8}" if pf else f" {'EKF eff.':>9}"
     lines = ["extra (not in the paper): PCRLB vs Monte Carlo RMSE (position, m; truths from the prior "
-             f"σ_p = {PRIOR_POSITION_STD:g} m, σ_v = {PRIOR_VELOCITY_STD:g} m/s; ± = 2 s.e.)",
-             f"{'geometry':>8} {'t [s]':>6} {'PCRLB':>9} {'EKF RMSE':>18} {'PLKF RMSE':>18} {'EKF eff.':>9}"]
+             f"σ_p = {PRIOR_POSITION_STD:g} m, σ_v = {PRIOR_VELOCITY_STD:g} m/s; ± = 2 s.e.)", head]
     for c in comparisons:
         t = np.asarray(c.times)
+        estimators = [(c.ekf_mse, c.ekf_se_mean), (c.plkf_mse, c.plkf_se_mean)]
+        if pf:
+            estimators.append((c.pf_mse, c.pf_se_mean))
         for tt in times:
             k = int(np.argmin(np.abs(t - tt)))
             b = math.sqrt(float(c.position_bound[k]))
             cells = []
-            for m, se in ((c.ekf_mse, c.ekf_se_mean), (c.plkf_mse, c.plkf_se_mean)):
+            for m, se in estimators:
+                if m is None:
+                    cells.append("-")
+                    continue
                 m, se = float(m[k]), float(se[k])
                 # RMSE ± 2 s.e. by the delta method: s.e.(√m) = s.e.(m) / (2√m).
                 cells.append(f"{math.sqrt(m):9.1f} ± {se / math.sqrt(m):5.1f}")
-            lines.append(f"{c.name:>8} {tt:6.0f} {b:9.1f} {cells[0]:>18} {cells[1]:>18} "
-                         f"{math.sqrt(float(c.ekf_mse[k])) / b:9.2f}")
+            line = f"{c.name:>8} {tt:6.0f} {b:9.1f} " + " ".join(f"{x:>18}" for x in cells)
+            line += f" {math.sqrt(float(c.ekf_mse[k])) / b:9.2f}"
+            if pf:
+                line += f" {math.sqrt(float(c.pf_mse[k])) / b:8.2f}" if c.pf_mse is not None else f" {'-':>8}"
+            lines.append(line)
     return "\n".join(lines)
 
 

@@ -209,8 +209,9 @@ def figure_velocity_variance():
 
 
 def figure_bounds(comparisons):
-    """Extra (not in the report): the PCRLB's RMSE bound next to the EKF's and the PLKF's Monte Carlo
-    position RMSE (truths drawn from the bound's prior, :mod:`.bounds`), one panel per geometry."""
+    """Extra (not in the report): the PCRLB's RMSE bound next to the EKF's and the PLKF's (and the
+    particle filter's, when run) Monte Carlo position RMSE (truths drawn from the bound's prior,
+    :mod:`.bounds`), one panel per geometry."""
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(comparisons), figsize=(5.2 * len(comparisons), 4), constrained_layout=True,
@@ -218,8 +219,10 @@ def figure_bounds(comparisons):
     for ax, c in zip(axes[0], comparisons):
         t = np.asarray(c.times)
         ax.plot(t, np.sqrt(np.asarray(c.position_bound)), "k", lw=2, label="PCRLB (√ trace of position block)")
-        for mse, se, color, label in ((c.ekf_mse, c.ekf_se_mean, "C1", "EKF"), (c.plkf_mse, c.plkf_se_mean, "C0",
-                                                                                  "PLKF (Table 2)")):
+        lines = [(c.ekf_mse, c.ekf_se_mean, "C1", "EKF"), (c.plkf_mse, c.plkf_se_mean, "C0", "PLKF (Table 2)")]
+        if c.pf_mse is not None:
+            lines.append((c.pf_mse, c.pf_se_mean, "C2", f"particle filter (N = {c.num_particles})"))
+        for mse, se, color, label in lines:
             mse, se = np.asarray(mse), np.asarray(se)
             rmse = np.sqrt(mse)
             half = se / rmse  # 2 s.e. of the RMSE (delta method): 2 · se / (2 √mse)

@@ -212,13 +212,20 @@ def paper_rows(studies: dict[str, GeometryStudy] | None = None, num_runs: int = 
     return rows
 
 
-def reproduce(out_dir, num_runs: int = DEFAULT_RUNS) -> tuple[list[PaperRow], list[str]]:
+EXTRA_PARTICLES = 1000  # the particle filter of the extra PCRLB table (issue 34)
+
+
+def reproduce(out_dir, num_runs: int = DEFAULT_RUNS, *,
+              extra_particles: int | None = EXTRA_PARTICLES) -> tuple[list[PaperRow], list[str]]:
     """Compute every row of :func:`paper_rows` and write the study's figures as PNG into ``out_dir``.
 
     **Arguments:**
 
     - ``out_dir``: the output directory for the PNG files (created if missing).
     - ``num_runs``: runs per Monte Carlo study (default ``DEFAULT_RUNS``).
+    - ``extra_particles``: particles of the regularised particle filter in the extra PCRLB table
+      and figure (:func:`~.bounds.particle_filter`; about 30 s at 2000 runs on 2 cores); None
+      leaves it out.
 
     **Returns:** ``(rows, figure_paths)``: the :class:`~jaxtrack.applications._report.PaperRow` list and
     the written file paths (str).
@@ -235,18 +242,20 @@ def reproduce(out_dir, num_runs: int = DEFAULT_RUNS) -> tuple[list[PaperRow], li
         ("fig08_errors_g3.png", lambda: figure_errors(studies["R3-A"])),
         ("consistency.png", lambda: figure_consistency([studies["R1-A"], studies["R2-A"]])),
     ], dpi=110)
-    _extra_bounds(out_dir, num_runs)
+    _extra_bounds(out_dir, num_runs, extra_particles)
     return rows, figures
 
 
-def _extra_bounds(out_dir, num_runs: int) -> None:
-    """Extra output, not in the paper (issue 21): the PCRLB vs the EKF's and PLKF's Monte Carlo RMSE per
-    geometry — a printed table and ``extra_pcrlb_vs_rmse.png`` (not among the returned paper figures)."""
+def _extra_bounds(out_dir, num_runs: int, particles: int | None = None) -> None:
+    """Extra output, not in the paper (issues 21, 34): the PCRLB vs the EKF's, PLKF's and (with
+    ``particles``) the regularised particle filter's Monte Carlo RMSE per geometry — a printed
+    table and ``extra_pcrlb_vs_rmse.png`` (not among the returned paper figures)."""
     from .bounds import bound_comparison, bound_table
     from .figures import figure_bounds
 
     keys = jax.random.split(jax.random.key(21), 3)
-    comparisons = [bound_comparison(name, k, num_runs) for name, k in zip(("R1", "R2", "R3"), keys)]
+    comparisons = [bound_comparison(name, k, num_runs, particles=particles)
+                   for name, k in zip(("R1", "R2", "R3"), keys)]
     table = bound_table(comparisons)
     # stderr and a file, not stdout: `jaxtrack reproduce tma --json` prints only its JSON document there.
     print(table, file=sys.stderr)
