@@ -82,14 +82,12 @@ demo: $(STAMP)
 # (per module: wall, XLA compile, trace seconds; about 80% of the suite is JAX compiling and tracing).
 ISOLATED := tests/test_faults.py tests/test_properties.py
 SIGNALS  := tests/test_cli_robustness.py
-# tests/conftest.py compiles the suite at XLA's LLVM -O0: most modules are compile-bound and gain
-# (2301 -> 2163 worker-s over the suite). These run long programs, which -O0 slows more than it
-# speeds their compilation (measured +13 to +50 s each; the row baseline also needs the default
-# level's rounding): they run at XLA's default level, in the last session with the isolated ones.
-DEFAULT_LEVEL := tests/test_bearings_tma.py tests/test_covariance.py tests/test_ho_study.py tests/test_imm_fit.py \
-                 tests/test_multitarget_learning.py tests/test_reproduce_cli.py tests/test_rows_baseline.py
-FIRST    := $(filter-out $(ISOLATED) $(SIGNALS) $(DEFAULT_LEVEL),$(sort $(wildcard tests/test_[a-m]*.py)))
-SECOND   := $(filter-out $(ISOLATED) $(SIGNALS) $(DEFAULT_LEVEL) $(FIRST),$(sort $(wildcard tests/test_*.py)))
+# tests/conftest.py compiles the suite at XLA's LLVM -O0 (most modules are compile-bound: 2301 ->
+# 2163 worker-s). Running the few runtime-bound modules at the default level in a session of their
+# own was measured too and gained nothing (the extra session and the compilations no longer shared
+# through the persistent cache ate it: 20:35 against 19:57).
+FIRST    := $(filter-out $(ISOLATED) $(SIGNALS),$(sort $(wildcard tests/test_[a-m]*.py)))
+SECOND   := $(filter-out $(ISOLATED) $(SIGNALS) $(FIRST),$(sort $(wildcard tests/test_*.py)))
 # --no-loadscope-reorder: keep the longest-first order of the work units of tests/conftest.py (xdist
 # would otherwise hand them out by test count, leaving the one-test notebooks for the end).
 XDIST    ?= -n 2 --dist loadscope --no-loadscope-reorder
@@ -99,13 +97,13 @@ test: $(STAMP)
 	  $(BIN)/pytest $(PYTEST_ARGS) $(SIGNALS); }
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(FIRST)
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(SECOND)
-	JAXTRACK_TEST_XLA_DEFAULT=1 $(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(ISOLATED) $(DEFAULT_LEVEL)
+	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
 	$(MAKE) docs
 
 test-slow: $(STAMP)
 	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(FIRST)
 	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(SECOND)
-	JAXTRACK_TEST_XLA_DEFAULT=1 $(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(ISOLATED) $(DEFAULT_LEVEL)
+	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
 	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(SIGNALS)
 
 # statsmodels, the MLE oracle, on its 0.14 line as well as the locked version: installs 0.14.x

@@ -31,8 +31,9 @@ else:
 # cache). The suite is compile-bound (58% of its worker-seconds are XLA compilation, its programs
 # mostly run for milliseconds): -O0 compiles about 25% faster and runs about 1.6x slower. Over the
 # whole suite (fresh clone, 2 cores): 2301 -> 2163 worker-seconds, .ci/run 21:04 -> 19:57. The
-# modules that run long programs lose more than they gain; `make test` runs them at the default
-# level (the Makefile's DEFAULT_LEVEL, with JAXTRACK_TEST_XLA_DEFAULT=1, which turns this off).
+# few modules that run long programs lose (+13 to +32 s each) but moving them to a default-level
+# session lost more (see the Makefile); the notebooks that run long programs get the default
+# level in their kernels (test_notebooks.py). JAXTRACK_TEST_XLA_DEFAULT=1 turns this off.
 # Both levels compute in IEEE double without fast-math; the rounding of fused multiply-adds may
 # differ (1e-16 relative per operation), which only the c1ffaca row baseline, held to 1e-12, sees
 # (test_rows_baseline.py). Users and the benchmarks run at XLA's default.
@@ -123,16 +124,18 @@ def pytest_addoption(parser):
 # runs before this file's, and then sends every test on its own, so a module fixture was built on
 # both workers and torn down between tests.)
 _LONG_FIRST = (
-    "test_notebooks", "test_performance_paths", "test_sharding", "test_bearings_tma", "test_design",
-    "test_obem_registration", "test_particle_filter", "test_maneuvering", "test_properties",
-    "test_multitarget_learning", "test_sensors", "test_multitarget_study", "test_sensitivity",
-    "test_calibration", "test_imm_smoother", "test_faults", "test_pcrlb", "test_square_root",
-    "test_nonlinear_filters", "test_mc_detections", "test_filters", "test_radar_bias",
-    "test_rows_baseline", "test_mc_design", "test_motion_models", "test_learning_em", "test_imm_fit",
-    "test_imm", "test_core_api", "test_mc_imm", "test_observer_design", "test_mc_gradient",
-    "test_sar_navigation", "test_multitarget_tracker", "test_figures", "test_association_jpda",
-    "test_learning_fit", "test_parallel_kalman", "test_cli", "test_iterated_ekf", "test_learning_mle",
-    "test_learning_coverage", "test_models", "test_filter_export",
+    "test_notebooks", "test_rows_baseline", "test_performance_paths", "test_bearings_tma",
+    "test_multitarget_learning", "test_sharding", "test_design", "test_obem_registration",
+    "test_particle_filter", "test_maneuvering", "test_properties", "test_sensors",
+    "test_multitarget_study", "test_sensitivity", "test_calibration", "test_imm_fit",
+    "test_imm_smoother", "test_faults", "test_pcrlb", "test_square_root", "test_nonlinear_filters",
+    "test_mc_detections", "test_filters", "test_radar_bias", "test_mc_design", "test_ho_study",
+    "test_covariance", "test_motion_models", "test_learning_em", "test_imm", "test_core_api",
+    "test_reproduce_cli", "test_mc_imm", "test_observer_design", "test_mc_gradient",
+    "test_sar_navigation", "test_tma_bounds", "test_multitarget_tracker", "test_figures",
+    "test_association_jpda", "test_learning_fit", "test_parallel_kalman", "test_cli",
+    "test_iterated_ekf", "test_learning_mle", "test_learning_coverage", "test_models",
+    "test_filter_export",
 )
 
 
