@@ -32,8 +32,9 @@ else:
 # mostly run for milliseconds): -O0 compiles about 25% faster and runs about 1.6x slower. Over the
 # whole suite (fresh clone, 2 cores): 2301 -> 2163 worker-seconds, .ci/run 21:04 -> 19:57. The
 # few modules that run long programs lose (+13 to +32 s each) but moving them to a default-level
-# session lost more (see the Makefile); the notebooks that run long programs get the default
-# level in their kernels (test_notebooks.py). JAXTRACK_TEST_XLA_DEFAULT=1 turns this off.
+# session lost more (see the Makefile), and so did the multitarget notebook's kernel at the default
+# level (58.6 s against 45.3 s: it no longer shared its tests' -O0 programs through the cache).
+# JAXTRACK_TEST_XLA_DEFAULT=1 turns this off.
 # Both levels compute in IEEE double without fast-math; the rounding of fused multiply-adds may
 # differ (1e-16 relative per operation), which only the c1ffaca row baseline, held to 1e-12, sees
 # (test_rows_baseline.py). Users and the benchmarks run at XLA's default.

@@ -6,7 +6,6 @@ missing or stale ones, with the same function, ``tools/execute_notebooks.py``).
 """
 
 import importlib.util
-import os
 from pathlib import Path
 
 import pytest
@@ -19,21 +18,8 @@ execute_notebooks = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(execute_notebooks)
 
 
-# Notebooks whose time is their programs' run time, not their compilation: their kernels compile at
-# XLA's default level instead of the suite's -O0 (tests/conftest.py). Measured in full runs:
-# multitarget_tracking 32 s at the default level against 45-48 s at -O0 (its trackers run 100
-# scans); the others are as fast or faster at -O0 once they cannot share the default-level
-# programs of their tests (schedule_design 38 s, ho_sensitivity 22 s at the default level alone).
-RUNTIME_BOUND = ("multitarget_tracking.ipynb",)
-
-
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
-def test_notebook_executes(path, tmp_path, monkeypatch):
-    if path.name in RUNTIME_BOUND:
-        from conftest import XLA_TEST_FLAG
-
-        flags = [f for f in os.environ.get("XLA_FLAGS", "").split() if f != XLA_TEST_FLAG]
-        monkeypatch.setenv("XLA_FLAGS", " ".join(flags))
+def test_notebook_executes(path, tmp_path):
     # The kernel's own (inline) matplotlib backend, as a user's Jupyter has: the figures must
     # come back as image outputs (jaxtrack never switches the backend).
     nb = execute_notebooks.execute_notebook(path, tmp_path)
