@@ -39,11 +39,11 @@ __all__ = [
 class CovarianceHistory(eqx.Module):
     """Covariances and gains of a linear filter over ``T`` steps (no data involved).
 
-    - ``predicted_cov`` ``(T, n, n)``: ``P_{k/k-1}`` (the prior at ``k = 0`` when
+    - ``predicted_cov`` ``(T, n, n)``: $P_{k/k-1}$ (the prior at ``k = 0`` when
       ``first_step="update"``).
-    - ``filtered_cov`` ``(T, n, n)``: ``P_{k/k}``.
+    - ``filtered_cov`` ``(T, n, n)``: $P_{k/k}$.
     - ``gain`` ``(T, n, m)``: ``W_k`` (zero columns where a component is missing).
-    - ``innovation_cov`` ``(T, m, m)``: ``S_k = H_k P_{k/k-1} H_kᵀ + R_k`` of the model the
+    - ``innovation_cov`` ``(T, m, m)``: $S_k = H_k P_{k/k-1} H_kᵀ + R_k$ of the model the
       recursion ran on (identity rows/columns where missing).
     """
 
@@ -83,7 +83,7 @@ def covariance_recursion(
         P_{k/k-1} = Φ_{k-1} P_{k-1/k-1} Φ_{k-1}ᵀ + Q_{k-1},\qquad
         P_{k/k} = (I − W_k H_k) P_{k/k-1} (I − W_k H_k)ᵀ + W_k R_k W_kᵀ
 
-    with the optimal gain ``W_k = P_{k/k-1} H_kᵀ S_k^{-1}`` unless ``gain`` is given (then the
+    with the optimal gain $W_k = P_{k/k-1} H_kᵀ S_k^{-1}$ unless ``gain`` is given (then the
     Joseph form gives the covariance of that suboptimal filter).
 
     **Arguments:**

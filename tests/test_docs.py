@@ -114,10 +114,16 @@ def _fake_site(tmp_path, *, figure: bool, anchors: list[str]) -> Path:
     (site / "api").mkdir(parents=True)
     (site / "index.html").write_text("<html></html>")
     img = '<img alt="" src="data:image/png;base64,iVBORw0KGgo=">' if figure else "<p>no figure</p>"
+    # A complete site's math pages hold typeset formulas; the other shows TeX left as written
+    # and a notebook's tqdm warning.
+    math = '<span class="katex"><math></math></span>' if figure else '<span class="arithmatex">\\(x\\)</span>'
     for nb in (ROOT / "notebooks").glob("*.ipynb"):
         (site / "gallery" / nb.stem).mkdir(parents=True)
-        (site / "gallery" / nb.stem / "index.html").write_text(img)
+        (site / "gallery" / nb.stem / "index.html").write_text(img + ("" if figure else check_site.TQDM_WARNING))
     (site / "api" / "index.html").write_text("".join(f'<h3 id="{a}">x</h3>' for a in anchors))
+    for rel in check_site.MATH_PAGES:
+        (site / rel).parent.mkdir(parents=True, exist_ok=True)
+        (site / rel).write_text((site / rel).read_text() + math if (site / rel).exists() else math)
     return site
 
 
@@ -127,6 +133,9 @@ def test_check_site_passes_a_complete_site_and_names_each_gap(tmp_path):
     problems = check_site.check(_fake_site(tmp_path / "b", figure=False, anchors=expected[1:]))
     assert f"API reference: no entry for {expected[0]}" in problems
     assert sum("rendered without a figure" in p for p in problems) == len(list((ROOT / "notebooks").glob("*.ipynb")))
+    assert sum("shows no typeset formula" in p for p in problems) == len(check_site.MATH_PAGES)
+    assert sum("TeX left untypeset" in p for p in problems) == len(check_site.MATH_PAGES)
+    assert sum("IProgress not found" in p for p in problems) == len(list((ROOT / "notebooks").glob("*.ipynb")))
 
 
 def test_reproduction_summary_comes_from_the_readme():

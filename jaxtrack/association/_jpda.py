@@ -362,7 +362,7 @@ def _jpda_dense(L: Array, valid: Array) -> tuple[Array, Array, Array]:
 class LoopyBP(AbstractAssociator):
     r"""Approximate JPDA marginals by loopy belief propagation (Williams & Lau 2014).
 
-    With each valid row normalised by its missed weight, ``ψ_{tj} = exp(L[t, j] − L[t, 0])``,
+    With each valid row normalised by its missed weight, $ψ_{tj} = \exp(L[t, j] − L[t, 0])$,
     the messages between track ``t`` and measurement ``j`` are (Williams & Lau 2014, Section
     III; Stone Soup's ``JPDAwithLBP._loopy_belief_propagation``)
 
@@ -371,8 +371,8 @@ class LoopyBP(AbstractAssociator):
         μ_{t→j} = \frac{ψ_{tj}}{1 + \sum_{j' ≠ j} ψ_{tj'} ν_{j'→t}},\qquad
         ν_{j→t} = \frac{1}{1 + \sum_{t' ≠ t} μ_{t'→j}},\qquad ν^{(0)} = 1,
 
-    and the beliefs ``β_{tj} = ψ_{tj} ν_{j→t} / (1 + Σ_{j'} ψ_{tj'} ν_{j'→t})``,
-    ``β_{t0} = 1 / (1 + Σ_{j'} ψ_{tj'} ν_{j'→t})``. Everything is in log space; the
+    and the beliefs $β_{tj} = ψ_{tj} ν_{j→t} / (1 + \sum_{j'} ψ_{tj'} ν_{j'→t})$,
+    $β_{t0} = 1 / (1 + \sum_{j'} ψ_{tj'} ν_{j'→t})$. Everything is in log space; the
     leave-one-out sums are prefix/suffix ``logsumexp`` (no cancellation when one term
     dominates). A fixed ``num_iters`` iterations run in ``lax.fori_loop`` (no data-dependent
     loop: one compilation, reverse-mode differentiable).

@@ -327,10 +327,10 @@ def pcrlb(
     detection_probability: float | ArrayLike | None = None,
     first_step: str = "update",
 ) -> PosteriorCRB:
-    """The posterior Cramér–Rao bound of ``model``, expectations by Monte Carlo over true trajectories.
+    r"""The posterior Cramér–Rao bound of ``model``, expectations by Monte Carlo over true trajectories.
 
     Tichavský, Muravchik & Nehorai (1998), Proposition 1, eq. (21), for additive Gaussian noise
-    (their Sec. III), in the form ``J_k = (Q_k + G_k (J_{k-1} + S_k)⁻¹ G_kᵀ)⁻¹ + E[H̃ᵀR⁻¹H̃]``
+    (their Sec. III), in the form $J_k = \big(Q_k + G_k (J_{k-1} + S_k)^{-1} G_kᵀ\big)^{-1} + E[H̃ᵀ R^{-1} H̃]$
     derived in :mod:`jaxtrack.bounds._pcrlb` (the same bound; it allows a singular ``Q``). The
     Jacobians are the model's ``transition_jacobian`` / ``measurement_jacobian`` (``jax.jacfwd``
     of ``transition`` / ``measurement`` unless the model supplies analytic ones), at the true

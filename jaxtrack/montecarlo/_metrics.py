@@ -34,12 +34,15 @@ def normalized_squared_error(error: Array, cov: Array) -> Array:
 
 
 def chi2_mean_bounds(dof: ArrayLike, num_runs: int, confidence: float = 0.95) -> np.ndarray:
-    """Two-sided bounds for the average of ``num_runs`` independent χ²(dof) variables.
+    r"""Two-sided bounds for the average of ``num_runs`` independent χ²(dof) variables.
 
     If each run's NEES (or NIS) is χ² with ``dof`` degrees of freedom, ``num_runs`` times their
     average is χ²(``num_runs·dof``), so the ``confidence`` interval of the average is
 
-    ``[χ²_{M·d}⁻¹(α/2) / M,  χ²_{M·d}⁻¹(1 − α/2) / M]``,  ``α = 1 − confidence``
+    $$
+    \left[\frac{(χ^2_{Md})^{-1}(α/2)}{M},\ \frac{(χ^2_{Md})^{-1}(1 − α/2)}{M}\right],
+    \qquad α = 1 − \text{confidence}
+    $$
 
     (Bar-Shalom, Li & Kirubarajan 2001, §5.4.2). ``dof`` may be an array (e.g. NIS degrees of
     freedom per step under a mask); where it is 0 both bounds are 0.

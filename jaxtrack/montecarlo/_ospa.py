@@ -54,16 +54,17 @@ class GOSPA(eqx.Module):
 
 
 class OSPA(eqx.Module):
-    """The OSPA distance and its localisation and cardinality components.
+    r"""The OSPA distance and its localisation and cardinality components.
 
     **Fields** (all shape ``()``, in the units of the points; under ``jax.vmap`` each gains the
     batch axes). With ``n = max(|X|, |Y|)``, ``m = min(|X|, |Y|)`` and ``π*`` the optimal
     permutation of Eq. (3) (Schuhmacher, Vo & Vo 2008):
 
-    - ``distance``: ``d̄_p^(c)(X, Y) = ((1/n)(Σ_{i≤m} d^(c)(x_i, y_π*(i))^p + c^p (n − m)))^{1/p}``.
-    - ``localisation``: ``((1/n) Σ_{i≤m} d^(c)(x_i, y_π*(i))^p)^{1/p}``, with the cut-off
-      distance ``d^(c) = min(d, c)`` (a pair at ``≥ c`` contributes ``c^p`` here).
-    - ``cardinality``: ``(c^p (n − m) / n)^{1/p}``.
+    - ``distance``: $\bar d_p^{(c)}(X, Y) = \Big(\frac{1}{n}\big(\sum_{i≤m} d^{(c)}(x_i, y_{π^*(i)})^p +
+      c^p (n − m)\big)\Big)^{1/p}$.
+    - ``localisation``: $\big(\frac{1}{n} \sum_{i≤m} d^{(c)}(x_i, y_{π^*(i)})^p\big)^{1/p}$, with the cut-off
+      distance $d^{(c)} = \min(d, c)$ (a pair at ``≥ c`` contributes ``c^p`` here).
+    - ``cardinality``: $\big(c^p (n − m) / n\big)^{1/p}$.
 
     These are the paper's localisation and cardinality components, p-th ROOTS (unlike
     :class:`GOSPA`'s parts, which are p-th powers): ``distance**p = localisation**p +

@@ -59,7 +59,7 @@ __all__ = [
 
 
 class CovarianceSensitivity(eqx.Module):
-    """``∂P_{k/k-1}/∂α`` and ``∂P_{k/k}/∂α`` for every step (eqs. (44), (46)–(47)).
+    """$∂P_{k/k-1}/∂α$ and $∂P_{k/k}/∂α$ for every step (eqs. (44), (46)–(47)).
 
     Shapes ``(T, n, n, *α.shape)``, as ``jax.jacfwd`` would return them; units of ``P`` per
     unit of ``α`` (e.g. ft²/s for τ in seconds).
@@ -144,7 +144,7 @@ def covariance_sensitivity(
     mask: ArrayLike | None = None,
     first_step: FirstStep = "update",
 ) -> CovarianceSensitivity:
-    r"""Sensitivity matrices ``∂P_{k/k-1}/∂α``, ``∂P_{k/k}/∂α`` of every step (Ho 1968, Sec. II-C).
+    r"""Sensitivity matrices $∂P_{k/k-1}/∂α$, $∂P_{k/k}/∂α$ of every step (Ho 1968, Sec. II-C).
 
     ``α`` is any scalar or array parameter on which the model depends through
     ``model_fn(α) -> LinearGaussianModel``: a sampling period (Φ and Q depend on τ), a plant-noise

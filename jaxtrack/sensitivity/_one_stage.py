@@ -222,7 +222,7 @@ def measurement_noise_period_tradeoff(p_xv: ArrayLike, tau: ArrayLike, alpha: Ar
 
 
 def predicted_position_variance(a: ArrayLike, tau: ArrayLike) -> Array:
-    r"""``(p_x)_{k/k-1} = 1 + aτ + τ²`` (Ho 1968, eq. (128)); ``a = 2p_xv`` (130) or ``2p_xv + α``
+    r"""$(p_x)_{k/k-1} = 1 + aτ + τ^2$ (Ho 1968, eq. (128)); ``a = 2p_xv`` (130) or ``2p_xv + α``
     for ``q_x = ατ`` (131).
 
     **Arguments** (normalised, dimensionless; arrays broadcast, shape ``(...)``):
@@ -236,7 +236,7 @@ def predicted_position_variance(a: ArrayLike, tau: ArrayLike) -> Array:
 
 
 def updated_position_variance(a: ArrayLike, tau: ArrayLike, r_x: ArrayLike) -> Array:
-    r"""``(p_x)_{k/k} = 1/(1/r_x + 1/(p_x)_{k/k-1})`` (Ho 1968, eq. (129)): the nomogram of Fig. 15.
+    r"""$(p_x)_{k/k} = \big(1/r_x + 1/(p_x)_{k/k-1}\big)^{-1}$ (Ho 1968, eq. (129)): the nomogram of Fig. 15.
 
     **Arguments** (normalised, dimensionless; arrays broadcast, shape ``(...)``):
 
@@ -248,7 +248,7 @@ def updated_position_variance(a: ArrayLike, tau: ArrayLike, r_x: ArrayLike) -> A
 
 
 def dimensionless_period_sensitivity(a: ArrayLike, tau: ArrayLike, r_x: ArrayLike) -> Array:
-    r"""``(Δp_x/p_x)_{k/k}/(Δτ/τ)`` for constant ``r_x`` (Ho 1968, eq. (134), Figs. 16–17).
+    r"""$(Δp_x/p_x)_{k/k} \,/\, (Δτ/τ)$ for constant ``r_x`` (Ho 1968, eq. (134), Figs. 16–17).
 
     .. math::  \frac{τ(a + 2τ)}{[(1 + aτ + τ^2)/r_x + 1](1 + aτ + τ^2)}
 
