@@ -7,6 +7,10 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
   :func:`run_tracker`;
 - ``_evaluation``: :func:`score_tracks` (GOSPA per scan, track counts) and
   :func:`tracker_monte_carlo` (the Monte Carlo engine's run primitive over a scenario);
+- ``_phd``: :class:`GMPHD` (the Gaussian-mixture PHD filter of Vo & Ma 2006 with a fixed
+  component budget) and :func:`run_phd`;
+- ``_cphd``: :class:`GMCPHD` (the Gaussian-mixture CPHD filter of Vo, Vo & Cantoni 2007: the
+  GM-PHD's pieces plus a cardinality distribution up to ``N_max``) and :func:`run_cphd`;
 - ``_learning``: :func:`fit_detection_and_clutter` (``P_D`` and the clutter density by maximum
   likelihood of the tracker's scan log-likelihood, with standard errors).
 """
@@ -31,6 +35,20 @@ from ._evaluation import (
 from ._learning import (
     DetectionClutterFit as DetectionClutterFit,
     fit_detection_and_clutter as fit_detection_and_clutter,
+)
+from ._phd import (
+    GMPHD as GMPHD,
+    GMPHDMixture as GMPHDMixture,
+    GMPHDStepInfo as GMPHDStepInfo,
+    PHDResult as PHDResult,
+    run_phd as run_phd,
+)
+from ._cphd import (
+    CPHDResult as CPHDResult,
+    CPHDState as CPHDState,
+    GMCPHD as GMCPHD,
+    GMCPHDStepInfo as GMCPHDStepInfo,
+    run_cphd as run_cphd,
 )
 from ._tracker import (
     CONFIRMED as CONFIRMED,
@@ -73,4 +91,14 @@ __all__ = [
     "tracker_monte_carlo",
     "DetectionClutterFit",
     "fit_detection_and_clutter",
+    "GMPHD",
+    "GMPHDMixture",
+    "GMPHDStepInfo",
+    "PHDResult",
+    "run_phd",
+    "GMCPHD",
+    "GMCPHDStepInfo",
+    "CPHDState",
+    "CPHDResult",
+    "run_cphd",
 ]

@@ -1,0 +1,601 @@
+r"""The Gaussian-mixture PHD filter (Vo & Ma 2006) with a fixed component budget.
+
+The PHD (first-moment intensity) ``v_k(x)`` of the multi-target state is a Gaussian mixture
+``Σ_i w_i N(x; m_i, P_i)``; its integral ``Σ_i w_i`` is the expected number of targets. One step
+is, in the notation of Vo & Ma (2006), "The Gaussian mixture probability hypothesis density
+filter", IEEE Trans. Signal Process. 54(11), 4091-4104:
+
+1. **predict** (Proposition 1; Table I, steps 1-2, without spawning): every component survives
+   with weight ``P_S w`` and the moments of the single-target filter's ``predict``; the birth
+   mixture ``γ_k`` (fixed weights, means, covariances) is appended;
+2. **update** (Proposition 2; Table I, steps 3-4): the missed block ``(1 − P_D) w_i`` first,
+   then, for every measurement ``z_j`` of the padded scan, the block
+   ``w_ij = P_D w_i q_ij / (κ + P_D Σ_l w_l q_lj)`` with ``q_ij = N(z_j; ẑ_i, S_i)`` and the
+   filter's conditioned moments: ``(1 + M_max)·J`` slots, ``J`` = capacity + births;
+3. **reduce** (Table II, "pruning", with thresholds ``T``, ``U`` and ``J_max``): prune below
+   ``T``, then a ``fori_loop`` over the ``J_max`` output slots, each taking the heaviest
+   remaining component and merging every remaining one within squared Mahalanobis distance ``U``
+   (measured with the candidate's covariance). What is left when the slots are used up is
+   counted (number and weight): an overflow is flagged, never silent, and :func:`run_phd` warns
+   on the host (:class:`CapacityWarning`, as :func:`run_tracker` does).
+
+Everything has a static shape, so :func:`run_phd` is one jitted ``lax.scan`` and is
+differentiable in ``P_D``, ``P_S``, ``κ`` and the birth weights wherever the reduction's discrete
+choices (prune, merge, seed order) do not flip: they are piecewise constant.
+
+``reduction="stonesoup"`` reproduces Stone Soup's ``PHDUpdater`` + ``GaussianMixtureReducer``
+(``stonesoup/updater/pointprocess.py``, ``stonesoup/mixturereducer/gaussianmixture.py``), which
+differ from Tables I-II in five places:
+
+- an undetected *birth* component is dropped (no missed term for births);
+- a detected birth's weight is multiplied by ``P_S`` too (its hypothesiser re-tags detected
+  births, and the updater applies ``P_S`` to every component not tagged "birth");
+- pruned weight (``w < T``; Table II keeps ``w > T``) is spread evenly over the kept components;
+- merging is pairwise against the *running* merged component, candidates in ascending weight
+  order, with ``d < U``, and the merged weight is capped at 1 after every pair;
+- a zero updated weight becomes machine epsilon (then pruned, its epsilon redistributed).
+
+Not reproduced: Stone Soup's truncation to ``max_number_components`` (which redistributes the
+truncated weight); here the budget is ``capacity`` and what exceeds it is counted instead.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
+
+from .._validation import InputError, is_concrete
+from ..association._gating import measurement_likelihoods
+from ..filters._base import AbstractFilter
+from ..filters._linalg import cholesky_and_inverse
+from ..models._base import AbstractStateSpaceModel
+from ._scenario import CapacityWarning, _positive_int
+
+_REDUCTIONS = ("vo-ma", "stonesoup")
+
+
+class GMPHDMixture(eqx.Module):
+    """The GM-PHD filter's state: a Gaussian mixture in ``J_max`` fixed slots.
+
+    **Fields** (``J`` = ``capacity``, ``n`` = state dimension):
+
+    - ``weights`` ``(J,)``: the components' weights (expected target counts, dimensionless; 0 in
+      free slots); ``means`` ``(J, n)``, ``covs`` ``(J, n, n)``: their moments in the state's
+      units (free slots hold the first birth component, so that their discarded predictions stay
+      finite); ``active`` ``(J,)`` bool: slots holding a component.
+    - ``step`` ``()`` int: the index of the next scan.
+    - ``num_dropped`` ``()`` int, ``dropped_weight`` ``()``: components (and their weight) that
+      the reduction left over for want of slots, summed over all scans so far.
+    """
+
+    weights: Float[Array, " J"]
+    means: Float[Array, "J n"]
+    covs: Float[Array, "J n n"]
+    active: Bool[Array, " J"]
+    step: Int[Array, ""]
+    num_dropped: Int[Array, ""]
+    dropped_weight: Float[Array, ""]
+
+    @property
+    def cardinality(self) -> Float[Array, ""]:
+        """The expected number of targets, ``Σ_i w_i`` (the intensity's integral; Vo & Ma 2006, §II-C)."""
+        return jnp.sum(jnp.where(self.active, self.weights, 0.0))
+
+    @property
+    def overflow(self) -> Bool[Array, ""]:
+        """True once the reduction left components over for want of slots."""
+        return self.num_dropped > 0
+
+
+class GMPHDStepInfo(NamedTuple):
+    """What one :meth:`GMPHD.step` computed besides the new mixture.
+
+    ``updated_cardinality`` ``()``: ``Σ w`` of the updated mixture before reduction;
+    ``log_normalizer`` ``(M,)``: ``log(κ + P_D Σ_i w_i q_ij)`` per measurement (0 for padding);
+    ``num_dropped`` ``()`` int, ``dropped_weight`` ``()``: left over by this scan's reduction;
+    ``num_pruned`` ``()`` int: components pruned below ``T``.
+    """
+
+    updated_cardinality: Float[Array, ""]
+    log_normalizer: Float[Array, " M"]
+    num_dropped: Int[Array, ""]
+    dropped_weight: Float[Array, ""]
+    num_pruned: Int[Array, ""]
+
+
+def _scalar(name, value, *, low, high=None, open_low=False):
+    x = jnp.asarray(value, float)
+    if x.shape != ():
+        raise InputError(f"`{name}` must be a scalar; got shape {x.shape}.")
+    if is_concrete(x):
+        v = float(x)
+        ok = (v > low if open_low else v >= low) and (high is None or v <= high) and math.isfinite(v)
+        if not ok:
+            interval = f"{'(' if open_low else '['}{low}, {high if high is not None else 'inf'}{']' if high is not None else ')'}"
+            raise InputError(f"`{name}` must lie in {interval}; got {v}.")
+    return x
+
+
+def _common_fields(filter, model, *, prob_survival, prob_detect, birth_weights, birth_means, birth_covs,
+                   capacity, prune_threshold, merge_threshold, gate, max_estimates) -> dict:
+    """The checked fields shared by :class:`GMPHD` and :class:`~jaxtrack.multitarget.GMCPHD`
+    (each argument as documented there), as a dict of attribute name to value."""
+    if not isinstance(filter, AbstractFilter):
+        raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
+    if filter.square_root:
+        raise InputError("`filter` must carry covariances, not Cholesky factors (square-root filters are not supported).")
+    if not isinstance(model, AbstractStateSpaceModel):
+        raise InputError(f"`model` must be a jaxtrack state-space model; got {type(model).__name__}.")
+    filter.check_model(model)
+    capacity = _positive_int("capacity", capacity)  # mixture slots
+    max_estimates = capacity if max_estimates is None else _positive_int("max_estimates", max_estimates)
+    n = model.state_dim
+    bw = jnp.asarray(birth_weights, float)
+    bm = jnp.asarray(birth_means, float)
+    bc = jnp.asarray(birth_covs, float)
+    if bw.ndim != 1 or bw.shape[0] < 1:
+        raise InputError(f"`birth_weights` must have shape (B,) with B >= 1; got {bw.shape}.")
+    B = bw.shape[0]
+    if bm.shape != (B, n):
+        raise InputError(f"`birth_means` must have shape ({B}, {n}) (B births, the model's n states); got {bm.shape}.")
+    if bc.shape != (B, n, n):
+        raise InputError(f"`birth_covs` must have shape ({B}, {n}, {n}); got {bc.shape}.")
+    if is_concrete(bw) and not (np.all(np.asarray(bw) >= 0.0) and np.all(np.isfinite(np.asarray(bw)))):
+        raise InputError(f"`birth_weights` must be finite and >= 0; got {np.asarray(bw)}.")
+    if is_concrete(bc):
+        c = np.asarray(bc)
+        if not np.all(np.isfinite(c)) or not np.allclose(c, np.swapaxes(c, -1, -2), rtol=1e-8, atol=0.0):
+            raise InputError("`birth_covs` must be finite and symmetric.")
+        if np.any(np.linalg.eigvalsh(c) <= 0.0):
+            raise InputError("`birth_covs` must be positive definite.")
+    # A leaf, not a static field: gated and ungated filters share one compiled program.
+    gate_ = jnp.asarray(gate, float)
+    if gate_.shape != () or (is_concrete(gate_) and not float(gate_) > 0.0):
+        raise InputError(f"`gate` must be a positive scalar Mahalanobis distance (inf: no gate); got {gate!r}.")
+    return {
+        "filter": filter, "model": model,
+        "prob_survival": _scalar("prob_survival", prob_survival, low=0.0, high=1.0, open_low=True),
+        "prob_detect": _scalar("prob_detect", prob_detect, low=0.0, high=1.0, open_low=True),
+        "prune_threshold": _scalar("prune_threshold", prune_threshold, low=0.0),
+        "merge_threshold": _scalar("merge_threshold", merge_threshold, low=0.0),
+        "birth_weights": bw, "birth_means": bm, "birth_covs": bc, "capacity": int(capacity), "gate": gate_,
+        "max_estimates": int(max_estimates),
+    }
+
+
+def _empty_mixture(f) -> GMPHDMixture:
+    """No components (free slots hold the first birth component, see :class:`GMPHDMixture`)."""
+    J, dtype = f.capacity, f.birth_means.dtype
+    return GMPHDMixture(
+        weights=jnp.zeros((J,), dtype),
+        means=jnp.broadcast_to(f.birth_means[0], (J,) + f.birth_means.shape[1:]),
+        covs=jnp.broadcast_to(f.birth_covs[0], (J,) + f.birth_covs.shape[1:]),
+        active=jnp.zeros((J,), bool),
+        step=jnp.zeros((), jnp.int32),
+        num_dropped=jnp.zeros((), jnp.int32),
+        dropped_weight=jnp.zeros((), dtype),
+    )
+
+
+def _predict_intensity(f, mixture: GMPHDMixture):
+    """Survival and births for any module ``f`` with :class:`GMPHD`'s fields (see
+    :meth:`GMPHD.predict`): ``(weights, means, covs, active, is_birth)``, ``J_max + B`` rows."""
+    k = mixture.step
+    mean, cov = jax.vmap(lambda x, P: f.filter.predict(f.model, x, P, k))(mixture.means, mixture.covs)
+    B = f.birth_weights.shape[0]
+    weights = jnp.concatenate([f.prob_survival * jnp.where(mixture.active, mixture.weights, 0.0), f.birth_weights])
+    means = jnp.concatenate([mean, f.birth_means])
+    covs = jnp.concatenate([cov, f.birth_covs])
+    active = jnp.concatenate([mixture.active, jnp.ones((B,), bool)])
+    is_birth = jnp.concatenate([jnp.zeros((f.capacity,), bool), jnp.ones((B,), bool)])
+    return weights, means, covs, active, is_birth
+
+
+def _pair_likelihoods(f, means, covs, active, measurements, valid, k):
+    """Every (component, measurement) pair's ``log N(z_j; ẑ_i, S_i)`` ``(J, M)`` (−inf where the
+    pair does not count), whether it counts (active component, valid and gated-in measurement)
+    ``(J, M)``, and the filter's conditioned moments ``(J, M, ...)``."""
+    loglik, nis, cond = jax.vmap(
+        lambda x, C: measurement_likelihoods(f.filter, f.model, x, C, measurements, valid, k)
+    )(means, covs)
+    pair = active[:, None] & valid[None, :]
+    # Stone Soup's DistanceHypothesiser keeps a pair when its distance < missed_distance; a NaN
+    # NIS compares False (outside); with gate = inf every finite NIS is inside.
+    pair = pair & (nis < f.gate.astype(nis.dtype) ** 2)
+    # Padded or gated-out log-likelihoods may be −inf/NaN: −inf here, and every use selects it away
+    # with a second `where`, so neither values nor gradients see it.
+    return jnp.where(pair, loglik, -jnp.inf), pair, cond
+
+
+def _updated_layout(w_miss, miss_active, w_det, pair, means, covs, cond):
+    """The updated mixture's ``(1 + M)·J`` slots: the missed block ``(J,)`` first, then one block
+    of ``J`` per measurement (slot ``(1 + j)·J + i``: component ``i`` on measurement ``j``)."""
+    weights = jnp.concatenate([w_miss, w_det.T.reshape(-1)])
+    m = jnp.concatenate([means, jnp.swapaxes(cond.mean, 0, 1).reshape((-1,) + means.shape[1:])])
+    P = jnp.concatenate([covs, jnp.swapaxes(cond.cov, 0, 1).reshape((-1,) + covs.shape[1:])])
+    active = jnp.concatenate([miss_active, pair.T.reshape(-1)])
+    return weights, m, P, active
+
+
+def _check_scans(measurements, valid, meas_dim):
+    """``(measurements, valid)`` as arrays, or :class:`~jaxtrack.InputError` naming the bad one."""
+    measurements = jnp.asarray(measurements)
+    valid = jnp.asarray(valid)
+    if measurements.ndim != 3:
+        raise InputError(f"`measurements` must be (T, M, m); got shape {measurements.shape}.")
+    if measurements.shape[-1] != meas_dim:
+        raise InputError(f"`measurements` have {measurements.shape[-1]} components; the model measures {meas_dim}.")
+    if valid.shape != measurements.shape[:2] or valid.dtype != bool:
+        raise InputError(f"`valid` must be boolean (T, M) = {measurements.shape[:2]}; got {valid.dtype} {valid.shape}.")
+    return measurements, valid
+
+
+def _warn_capacity(what, capacity, result):
+    """A host-side :class:`CapacityWarning` when ``result`` (with ``overflow``, ``num_dropped``,
+    ``dropped_weight``) is concrete and the reduction left components over."""
+    if is_concrete(result.overflow) and bool(result.overflow):
+        warnings.warn(
+            f"the {what} mixture's capacity ({capacity} components) was too small: "
+            f"{int(jnp.sum(result.num_dropped))} components (weight {float(jnp.sum(result.dropped_weight)):.3g}) "
+            "were left over by the reduction; raise `capacity`.",
+            CapacityWarning,
+            stacklevel=3,
+        )
+
+
+def _reduce_mixture(f, weights, means, covs, active):
+    """:meth:`GMPHD.reduce` for any module ``f`` with its fields (``prune_threshold``,
+    ``merge_threshold``, ``reduction``, ``capacity``, the birth mixture)."""
+    dtype = weights.dtype
+    T, U = f.prune_threshold.astype(dtype), f.merge_threshold.astype(dtype)
+    ss = f.reduction == "stonesoup"
+    keep = active & ((weights >= T) if ss else (weights > T))
+    num_pruned = jnp.sum(active & ~keep).astype(jnp.int32)
+    if ss:
+        # Stone Soup spreads the pruned weight evenly over the kept components.
+        pruned = jnp.sum(jnp.where(active & ~keep, weights, 0.0))
+        n_keep = jnp.sum(keep)
+        weights = weights + jnp.where(keep, pruned / jnp.maximum(n_keep, 1), 0.0)
+    # Each candidate's inverse covariance, once: the distance uses the candidate's P_i.
+    _, chol_inv = jax.vmap(cholesky_and_inverse)(covs)
+    prec = jnp.einsum("kji,kjl->kil", chol_inv, chol_inv)
+    J = f.capacity
+    K, n = means.shape
+    masked = jnp.where(keep, weights, -jnp.inf)
+    # Stone Soup pops the last of a stable ascending sort: among equal weights the later one.
+    order = jnp.argsort(masked, stable=True)  # ascending
+    out = (jnp.zeros((J,), dtype), jnp.zeros((J, n), dtype), jnp.zeros((J, n, n), dtype), jnp.zeros((J,), bool))
+
+    def pass_vo_ma(remaining):
+        j = jnp.argmax(jnp.where(remaining, weights, -jnp.inf))
+        d = means - means[j][None, :]
+        dist = jnp.einsum("ki,kil,kl->k", d, prec, d)
+        L = remaining & (dist <= U)
+        wl = jnp.where(L, weights, 0.0)
+        wsum = jnp.sum(wl)
+        safe = jnp.where(wsum > 0.0, wsum, 1.0)
+        mean = jnp.sum(wl[:, None] * means, axis=0) / safe
+        dm = mean[None, :] - means
+        cov = jnp.sum(wl[:, None, None] * (covs + dm[:, :, None] * dm[:, None, :]), axis=0) / safe
+        return wsum, mean, cov, remaining & ~L
+
+    def pass_stonesoup(remaining):
+        last = jnp.max(jnp.where(remaining[order], jnp.arange(K), -1))
+        j = order[jnp.maximum(last, 0)]
+        remaining = remaining.at[j].set(False)
+
+        def inner(p, carry):
+            w_b, m_b, P_b, rem = carry
+            c = order[p]
+            d = m_b - means[c]
+            hit = rem[c] & (d @ prec[c] @ d < U)
+            ws = w_b + weights[c]
+            ws_safe = jnp.where(ws > 0.0, ws, 1.0)  # a pruned (T = 0) pair: keep it finite
+            a, b = w_b / ws_safe, weights[c] / ws_safe
+            m_new = m_b * a + means[c] * b
+            P_new = P_b * a + covs[c] * b + jnp.outer(d, d) * a * b
+            return (jnp.where(hit, jnp.minimum(ws, 1.0), w_b), jnp.where(hit, m_new, m_b),
+                    jnp.where(hit, P_new, P_b), rem.at[c].set(rem[c] & ~hit))
+
+        return jax.lax.fori_loop(0, K, inner, (weights[j], means[j], covs[j], remaining))
+
+    def body(slot, carry):
+        remaining, (w_o, m_o, P_o, a_o) = carry
+        has = jnp.any(remaining)
+        if ss:
+            def skip(rem):
+                return jnp.zeros((), dtype), means[0], covs[0], rem
+            wsum, mean, cov, remaining = jax.lax.cond(has, pass_stonesoup, skip, remaining)
+        else:
+            wsum, mean, cov, remaining = pass_vo_ma(remaining)
+        w_o = w_o.at[slot].set(jnp.where(has, wsum, 0.0))
+        m_o = m_o.at[slot].set(jnp.where(has, mean, f.birth_means[0].astype(dtype)))
+        P_o = P_o.at[slot].set(jnp.where(has, cov, f.birth_covs[0].astype(dtype)))
+        return remaining, (w_o, m_o, P_o, a_o.at[slot].set(has))
+
+    remaining, (w_o, m_o, P_o, a_o) = jax.lax.fori_loop(0, J, body, (keep, out))
+    num_dropped = jnp.sum(remaining).astype(jnp.int32)
+    dropped_weight = jnp.sum(jnp.where(remaining, weights, 0.0))
+    return w_o, m_o, P_o, a_o, num_dropped, dropped_weight, num_pruned
+
+
+class GMPHD(eqx.Module):
+    r"""The GM-PHD filter of Vo & Ma (2006) with a fixed component budget ``J_max``.
+
+    **Arguments:**
+
+    - ``filter``: a jaxtrack :class:`~jaxtrack.filters.AbstractFilter` whose ``predict`` and
+      ``update`` give each component's moments (the Kalman filter gives Table I exactly; an
+      EKF or UKF gives the linearised GM-PHD of Vo & Ma §III-B). Square-root filters are refused.
+    - ``model``: the single-target state-space model (motion and sensor) every target follows.
+    - ``prob_survival``: ``P_S`` in ``(0, 1]``; ``prob_detect``: ``P_D`` in ``(0, 1]``.
+    - ``clutter_density``: ``κ``, clutter points per unit measurement-space volume per scan
+      (e.g. per m² for positions), ``>= 0``.
+    - ``birth_weights`` ``(B,)`` (expected births per scan, each ``>= 0``), ``birth_means``
+      ``(B, n)``, ``birth_covs`` ``(B, n, n)``: the birth intensity ``γ_k``.
+    - ``capacity``: ``J_max``, the number of mixture slots after reduction (static).
+    - ``prune_threshold``: ``T`` (default 1e-5); ``merge_threshold``: ``U``, a squared
+      Mahalanobis distance (default 4); ``extraction_threshold``: the weight above which a
+      component is reported as a target (default 0.5, Table III).
+    - ``gate``: optional Mahalanobis distance ``sqrt(yᵀS⁻¹y)`` beyond which a measurement does not
+      update a component (Stone Soup's ``DistanceHypothesiser(missed_distance=...)``); default
+      ``inf``: no gate, as in Vo & Ma.
+    - ``reduction``: ``"vo-ma"`` (default, Table II) or ``"stonesoup"`` (the differences are in the
+      module docstring).
+    - ``max_estimates``: the static number of estimate slots (default ``capacity``).
+
+    ``P_S``, ``P_D``, ``κ``, the birth mixture, the thresholds and the gate are array leaves
+    (differentiable, and changing them does not recompile :func:`run_phd`).
+
+    **Raises:** :class:`~jaxtrack.InputError` naming the argument (a probability outside
+    ``(0, 1]``, a negative density or threshold, birth arrays of the wrong shape, a birth
+    covariance not symmetric positive definite, a non-positive ``capacity``, an unknown
+    ``reduction``).
+
+    Example (a constant-velocity target in the plane, positions measured)::
+
+        model = constant_velocity(...)                      # any LinearGaussianModel
+        phd = GMPHD(KalmanFilter(), model, prob_survival=0.99, prob_detect=0.9,
+                    clutter_density=1e-4, birth_weights=[0.1], birth_means=[m_b],
+                    birth_covs=[P_b], capacity=50)
+        result = run_phd(phd, scans.measurements, scans.valid)
+        result.cardinality          # (T,) expected number of targets
+        result.estimates[k][result.estimate_mask[k]]        # scan k's target states
+
+    ??? cite "Reference"
+
+        ```bibtex
+        @article{vo2006gmphd,
+          author  = {Vo, Ba-Ngu and Ma, Wing-Kin},
+          title   = {The {G}aussian Mixture Probability Hypothesis Density Filter},
+          journal = {IEEE Transactions on Signal Processing},
+          volume  = {54}, number = {11}, pages = {4091--4104}, year = {2006}}
+        ```
+    """
+
+    filter: AbstractFilter
+    model: AbstractStateSpaceModel
+    prob_survival: Float[Array, ""]
+    prob_detect: Float[Array, ""]
+    clutter_density: Float[Array, ""]
+    birth_weights: Float[Array, " B"]
+    birth_means: Float[Array, "B n"]
+    birth_covs: Float[Array, "B n n"]
+    prune_threshold: Float[Array, ""]
+    merge_threshold: Float[Array, ""]
+    extraction_threshold: Float[Array, ""]
+    capacity: int = eqx.field(static=True)
+    gate: Float[Array, ""]
+    reduction: str = eqx.field(static=True)
+    max_estimates: int = eqx.field(static=True)
+
+    def __init__(
+        self,
+        filter: AbstractFilter,
+        model: AbstractStateSpaceModel,
+        *,
+        prob_survival: ArrayLike,
+        prob_detect: ArrayLike,
+        clutter_density: ArrayLike,
+        birth_weights: ArrayLike,
+        birth_means: ArrayLike,
+        birth_covs: ArrayLike,
+        capacity: int,
+        prune_threshold: ArrayLike = 1e-5,
+        merge_threshold: ArrayLike = 4.0,
+        extraction_threshold: ArrayLike = 0.5,
+        gate: ArrayLike = math.inf,
+        reduction: str = "vo-ma",
+        max_estimates: int | None = None,
+    ):
+        if reduction not in _REDUCTIONS:
+            raise InputError(f"`reduction` must be one of {_REDUCTIONS}; got {reduction!r}.")
+        for name, value in _common_fields(
+            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth_weights=birth_weights,
+            birth_means=birth_means, birth_covs=birth_covs, capacity=capacity, prune_threshold=prune_threshold,
+            merge_threshold=merge_threshold, gate=gate, max_estimates=max_estimates,
+        ).items():
+            setattr(self, name, value)
+        self.extraction_threshold = _scalar("extraction_threshold", extraction_threshold, low=0.0)
+        self.clutter_density = _scalar("clutter_density", clutter_density, low=0.0)
+        self.reduction = reduction
+
+    # ------------------------------------------------------------------------------------------
+    def init(self) -> GMPHDMixture:
+        """The empty mixture (no targets before the first scan; births enter in :meth:`predict`)."""
+        return _empty_mixture(self)
+
+    def predict(self, mixture: GMPHDMixture):
+        r"""Prediction (Vo & Ma 2006, Proposition 1; Table I, steps 1-2, no spawning): ``P_S w``, the
+        filter's predicted moments, births appended.
+
+        **Returns:** ``(weights, means, covs, active, is_birth)`` with ``J_max + B`` rows: the
+        survivors first, then the birth components (at step ``k``, not predicted).
+        """
+        return _predict_intensity(self, mixture)
+
+    def update(self, predicted, measurements, valid, k):
+        r"""Update (Vo & Ma 2006, Proposition 2; Table I, steps 3-4): the missed block, then one
+        block per measurement.
+
+        ``w_i^{miss} = (1 − P_D) w_i`` (with ``reduction="stonesoup"``: 0 for births, and a birth's
+        ``w_i`` is ``P_S w_γ`` in the detection terms) and
+
+        .. math::
+
+            w_{ij} = \frac{P_D w_i q_{ij}}{κ + P_D \sum_l w_l q_{lj}}, \qquad
+            q_{ij} = N(z_j; ẑ_i, S_i),
+
+        with the filter's conditioned mean and covariance. Slot ``(1 + j)·J + i`` holds
+        component ``i`` updated on measurement ``j`` (slot ``i``: missed).
+
+        **Returns:** ``(weights, means, covs, active, log_normalizer)``, the first four with
+        ``(1 + M)·J`` rows; ``log_normalizer`` ``(M,)``.
+        """
+        w, m, P, active, is_birth = predicted
+        loglik, pair, cond = _pair_likelihoods(self, m, P, active, measurements, valid, k)
+        q = jnp.where(pair, jnp.exp(jnp.where(pair, loglik, 0.0)), 0.0)
+        if self.reduction == "stonesoup":
+            # Stone Soup's hypothesiser re-tags a detected birth component, so its updater applies
+            # P_S to it as well (it applies P_S in the update, to every non-"birth" tag).
+            w = jnp.where(is_birth, self.prob_survival * w, w)
+        numer = self.prob_detect * w[:, None] * q  # (J, M)
+        denom = self.clutter_density + jnp.sum(numer, axis=0)  # (M,)
+        safe = jnp.where(denom > 0.0, denom, 1.0)
+        w_det = jnp.where(pair, numer / safe[None, :], 0.0)
+        miss_active = active & ~is_birth if self.reduction == "stonesoup" else active
+        w_miss = jnp.where(miss_active, (1.0 - self.prob_detect) * w, 0.0)
+        weights, means, covs, out_active = _updated_layout(w_miss, miss_active, w_det, pair, m, P, cond)
+        if self.reduction == "stonesoup":
+            # Stone Soup replaces a zero weight by machine epsilon (to keep its reducer's divisions
+            # finite); the component is then pruned, but its epsilon joins the redistributed weight.
+            weights = jnp.where(out_active & (weights == 0.0), jnp.finfo(weights.dtype).eps, weights)
+        log_normalizer = jnp.where(valid, jnp.log(safe), 0.0)
+        return weights, means, covs, out_active, log_normalizer
+
+    def reduce(self, weights, means, covs, active):
+        r"""Pruning and merging (Vo & Ma 2006, Table II, §III-C) into ``J_max`` slots.
+
+        With ``I = {i : w_i > T}``, each of the ``J_max`` passes takes ``j = argmax_{i∈I} w_i``,
+        ``L = {i ∈ I : (m_i − m_j)ᵀ P_i⁻¹ (m_i − m_j) ≤ U}`` and emits
+        ``w̃ = Σ_L w_i``, ``m̃ = Σ_L w_i m_i / w̃``,
+        ``P̃ = Σ_L w_i (P_i + (m̃ − m_i)(m̃ − m_i)ᵀ) / w̃``, then ``I ← I \ L``. What remains in
+        ``I`` after ``J_max`` passes is counted, not stored (Vo & Ma instead keep the ``J_max``
+        heaviest merged components; here the first ``J_max`` seeds, in decreasing seed weight).
+
+        **Returns:** ``(weights, means, covs, active, num_dropped, dropped_weight, num_pruned)``.
+        """
+        return _reduce_mixture(self, weights, means, covs, active)
+
+    def step(self, mixture: GMPHDMixture, measurements, valid) -> tuple[GMPHDMixture, GMPHDStepInfo]:
+        """One scan: :meth:`predict`, :meth:`update` on the padded scan, :meth:`reduce`.
+
+        **Arguments:** ``mixture``: the :class:`GMPHDMixture` after scan ``k − 1`` (or
+        :meth:`init`); ``measurements`` ``(M, m)`` in the sensor's units (padding may be NaN);
+        ``valid`` ``(M,)`` bool. **Returns:** ``(mixture, info)``.
+        """
+        dtype = mixture.weights.dtype
+        measurements = jnp.asarray(measurements, dtype)
+        valid = jnp.asarray(valid, bool)
+        predicted = self.predict(mixture)
+        w, m, P, active, log_norm = self.update(predicted, measurements, valid, mixture.step)
+        updated_card = jnp.sum(jnp.where(active, w, 0.0))
+        w, m, P, active, n_drop, w_drop, n_pruned = self.reduce(w, m, P, active)
+        new = GMPHDMixture(w, m, P, active, mixture.step + 1, mixture.num_dropped + n_drop,
+                           mixture.dropped_weight + w_drop)
+        return new, GMPHDStepInfo(updated_card, log_norm, n_drop, w_drop, n_pruned)
+
+    def estimates(self, mixture: GMPHDMixture):
+        r"""Multi-target state extraction (Vo & Ma 2006, Table III).
+
+        Every component with ``w_i >`` ``extraction_threshold`` gives ``round(w_i)`` copies of its
+        mean (``round`` half up, ``⌊w + 1/2⌋``), padded to ``max_estimates`` rows.
+
+        **Returns:** ``(states, mask, count)``: ``(E, n)``, ``(E,)`` bool and the number of
+        estimates ``()`` int before padding (more than ``E`` means some were not stored).
+        """
+        w = jnp.where(mixture.active, mixture.weights, 0.0)
+        copies = jnp.where(w > self.extraction_threshold.astype(w.dtype), jnp.floor(w + 0.5), 0.0).astype(jnp.int32)
+        ends = jnp.cumsum(copies)
+        E = self.max_estimates
+        e = jnp.arange(E)
+        src = jnp.searchsorted(ends, e, side="right")
+        mask = e < ends[-1]
+        states = jnp.where(mask[:, None], mixture.means[jnp.minimum(src, self.capacity - 1)], 0.0)
+        return states, mask, ends[-1]
+
+
+class PHDResult(eqx.Module):
+    """A GM-PHD run over ``T`` scans.
+
+    **Fields** (``J`` = capacity, ``E`` = ``max_estimates``): ``weights`` ``(T, J)``, ``means``
+    ``(T, J, n)``, ``covs`` ``(T, J, n, n)``, ``active`` ``(T, J)``: the reduced mixture after each
+    scan; ``cardinality`` ``(T,)``: ``Σ w`` after reduction; ``updated_cardinality`` ``(T,)``: before
+    it; ``estimates`` ``(T, E, n)``, ``estimate_mask`` ``(T, E)``, ``num_estimates`` ``(T,)``
+    (Table III); ``num_dropped`` ``(T,)``, ``dropped_weight`` ``(T,)``: left over per scan for
+    want of slots; ``overflow`` ``()``: some scan left components over; ``final``: the last
+    :class:`GMPHDMixture`.
+    """
+
+    weights: Float[Array, "T J"]
+    means: Float[Array, "T J n"]
+    covs: Float[Array, "T J n n"]
+    active: Bool[Array, "T J"]
+    cardinality: Float[Array, " T"]
+    updated_cardinality: Float[Array, " T"]
+    estimates: Float[Array, "T E n"]
+    estimate_mask: Bool[Array, "T E"]
+    num_estimates: Int[Array, " T"]
+    num_dropped: Int[Array, " T"]
+    dropped_weight: Float[Array, " T"]
+    overflow: Bool[Array, ""]
+    final: GMPHDMixture
+
+    @property
+    def scan_overflow(self) -> Bool[Array, " T"]:
+        """Per scan: True where the reduction left components over for want of slots."""
+        return self.num_dropped > 0
+
+
+@eqx.filter_jit
+def _run_phd(phd, measurements, valid):
+    def body(mixture, scan):
+        mixture, info = phd.step(mixture, *scan)
+        states, mask, count = phd.estimates(mixture)
+        out = (mixture.weights, mixture.means, mixture.covs, mixture.active, mixture.cardinality,
+               info.updated_cardinality, states, mask, count, info.num_dropped, info.dropped_weight)
+        return mixture, out
+
+    final, outs = jax.lax.scan(body, phd.init(), (measurements, valid))
+    return PHDResult(*outs, final.overflow, final)
+
+
+def run_phd(phd: GMPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: bool = True) -> PHDResult:
+    """Run a GM-PHD filter over ``T`` scans: one jitted ``lax.scan`` of :meth:`GMPHD.step`.
+
+    **Arguments:**
+
+    - ``phd``: the :class:`GMPHD`.
+    - ``measurements``: ``(T, M, m)`` padded scans in the sensor's units (padding may be NaN);
+      ``valid``: boolean ``(T, M)``, False for padding (a scenario's ``trajectory.scans``).
+    - ``warn``: warn (:class:`CapacityWarning`) on the host when the reduction left components
+      over for want of slots (concrete results only).
+
+    **Returns:** a :class:`PHDResult`.
+
+    **Raises:** :class:`~jaxtrack.InputError` naming ``phd``, ``measurements`` or ``valid``.
+    """
+    if not isinstance(phd, GMPHD):
+        raise InputError(f"`phd` must be a GMPHD; got {type(phd).__name__}.")
+    measurements, valid = _check_scans(measurements, valid, phd.model.meas_dim)
+    result = _run_phd(phd, measurements, valid)
+    if warn:
+        _warn_capacity("GM-PHD", phd.capacity, result)
+    return result
