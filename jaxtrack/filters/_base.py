@@ -105,10 +105,16 @@ class AbstractFilter(eqx.Module):
     ``needs_key`` (class-level flag): True for filters that draw random numbers (the
     :class:`~jaxtrack.filters.ParticleFilter`): their ``init(model, key=...)`` takes a PRNG key, and
     batches and Monte Carlo runs give every run its own (:mod:`jaxtrack.montecarlo`: from the run's key).
+
+    ``batch_block`` (class-level): runs per ``vmap``-ed block in
+    :func:`~jaxtrack.filters.run_filter_batch` when every run carries its own covariance (None: the
+    batch's default, 2,048); a filter whose step keeps larger buffers per run sets a smaller one.
     """
 
     square_root: ClassVar[bool] = False
     needs_key: ClassVar[bool] = False
+    # Runs per vmapped block of run_filter_batch's per-run path; None: the batch's default.
+    batch_block: ClassVar[int | None] = None
 
     @abc.abstractmethod
     def predict(

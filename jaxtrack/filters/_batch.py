@@ -45,7 +45,8 @@ from ._linalg import cholesky_and_inverse
 CovarianceMode = Literal["auto", "shared", "per_run"]
 
 # Runs per vmapped block on the per-run path. Measured on 2 cores (per-run masks, 10k × 200):
-# 2048 beats 512 by 20–25% at 6 and 9 states and matches it at 4; 128 is 40% slower.
+# 2048 beats 512 by 20–25% at 6 and 9 states and matches it at 4; 128 is 40% slower. A filter
+# may ask for another size (AbstractFilter.batch_block: the unscented filter's is 512).
 _RUN_BLOCK = 2048
 
 
@@ -399,7 +400,8 @@ def _run_per_run(filter, model, z, observed, first_step, save, throw):
         return _scan_filter(filter, model, z_i, obs_i, first_step, save)
 
     runs = jnp.arange(z.shape[0])
-    res = map_blocks(one, ((z, observed) if per_run_mask else z, runs), _RUN_BLOCK)
+    block = _RUN_BLOCK if filter.batch_block is None else filter.batch_block
+    res = map_blocks(one, ((z, observed) if per_run_mask else z, runs), block)
     result = BatchFilterResult(
         res.filtered_mean, res.filtered_cov, res.predicted_mean, res.predicted_cov,
         res.innovation, res.innovation_cov, res.num_observed, res.log_likelihood,

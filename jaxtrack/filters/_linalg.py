@@ -61,7 +61,7 @@ def matmul(a: Array, b: Array) -> Array:
     return out
 
 
-def cholesky(a: Float[Array, "d d"]) -> Float[Array, "d d"]:
+def cholesky(a: Float[Array, "d d"], unroll_max: int = UNROLL_MAX) -> Float[Array, "d d"]:
     """Lower Cholesky factor ``L`` (``L Lᵀ = a``) of a symmetric positive definite ``a``.
 
     Reads the lower triangle only. Not positive definite → NaN entries (as LAPACK's ``potrf``
@@ -70,11 +70,13 @@ def cholesky(a: Float[Array, "d d"]) -> Float[Array, "d d"]:
     **Arguments:**
 
     - ``a``: the matrix, ``(..., d, d)``.
+    - ``unroll_max``: the largest ``d`` written out entry by entry (default :data:`UNROLL_MAX`);
+      a caller that factorises once per run and step may write out larger ones.
 
     **Returns:** ``L``, lower triangular, ``(..., d, d)``, in the square root of ``a``'s units.
     """
     d = a.shape[-1]
-    if d > UNROLL_MAX:
+    if d > unroll_max:
         return jnp.linalg.cholesky(a)
     # Cholesky–Banachiewicz, row by row; the same operations and rounding as LAPACK's
     # unblocked algorithm up to the order of the sums.

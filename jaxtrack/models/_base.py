@@ -57,6 +57,20 @@ def wrap_angle(angle: ArrayLike) -> Array:
     return jnp.where(wrapped == -jnp.pi, jnp.pi, wrapped)
 
 
+def affine_in_state(fn):
+    """Mark a transition function as ``x ↦ F_k x (+ b_k)`` with ``F_k = transition_matrix(k)``.
+
+    The mark is read from the class (:func:`~jaxtrack.models._components.affine_transition_matrix`),
+    so a subclass that overrides the marked method loses it unless it marks its own. Filters use it
+    to propagate moments exactly where sigma points would only reproduce ``F P Fᵀ`` (the
+    unscented filter's prediction).
+
+    **Arguments:** ``fn`` the method. **Returns:** ``fn``, marked.
+    """
+    fn.affine_in_state = True
+    return fn
+
+
 def at_step(a: Array, k, matrix_ndim: int) -> Array:
     """Return ``a`` if it is constant (``a.ndim == matrix_ndim``) or ``a[k]`` if given per step.
 
@@ -379,6 +393,7 @@ class LinearGaussianModel(AbstractStateSpaceModel):
     def measurement_noise_cov(self, k) -> Float[Array, "m m"]:
         return at_step(self.R, k, 2)
 
+    @affine_in_state
     def transition(self, x, k):
         fx = self.transition_matrix(k) @ x
         if self.b is not None:

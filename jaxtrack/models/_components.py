@@ -199,3 +199,23 @@ class TrackingModel(AbstractStateSpaceModel):
 
     def measurement_noise_cov(self, k):
         return self.measurement_model.noise_cov(k)
+
+
+def affine_transition_matrix(model: AbstractStateSpaceModel, k) -> Array | None:
+    """``F_k`` when ``model.transition`` is ``x ↦ F_k x (+ b_k)`` by construction, else None.
+
+    Decided at trace time from the classes alone: a :class:`~jaxtrack.models.LinearGaussianModel`,
+    or a :class:`TrackingModel` whose motion model's ``mean`` carries the
+    :func:`~jaxtrack.models._base.affine_in_state` mark (``LinearTransition``, ``ConstantVelocity``,
+    ``ConstantAcceleration``, ``CoordinatedTurn`` with its known turn rate). A subclass that
+    overrides the function is not affine unless it marks its own.
+
+    **Arguments:** ``model``; ``k`` the step index. **Returns:** ``F_k`` ``(n, n)`` or None.
+    """
+    if getattr(type(model).transition, "affine_in_state", False):
+        return model.transition_matrix(k)
+    if isinstance(model, TrackingModel) and type(model).transition is TrackingModel.transition:
+        motion = model.transition_model
+        if getattr(type(motion).mean, "affine_in_state", False):
+            return motion.transition_matrix(k)
+    return None

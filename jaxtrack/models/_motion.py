@@ -67,14 +67,13 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._deprecation import keyword_args
 from .._validation import InputError, check_covariance, check_finite, check_shape
-from ._base import _num_steps_of, at_step
+from ._base import _num_steps_of, affine_in_state, at_step
 from ._components import AbstractTransitionModel
 from ._discretize import check_taus
 from ._kinematic import _ca_blocks, _check_nonneg, _cv_blocks, _kron_diag
 from ._layout import TURN_RATE, check_layout, kinematic_layout, num_axes, shift_axes
 
-# --------------------------------------------------------------------------------------------
-# helpers
+# helpers ------------------------------------------------------------------------------------
 
 
 def _check_dim(dim, allowed=(1, 2, 3)) -> int:
@@ -185,8 +184,7 @@ def _cast(x, *params):
     return jnp.asarray(x, dtype), [jnp.asarray(p, dtype) for p in params]
 
 
-# --------------------------------------------------------------------------------------------
-# linear components
+# linear components --------------------------------------------------------------------------
 
 
 class LinearTransition(AbstractTransitionModel):
@@ -242,6 +240,7 @@ class LinearTransition(AbstractTransitionModel):
         """``F_k``."""
         return at_step(self.F, k, 2)
 
+    @affine_in_state
     def mean(self, x, k):
         return self.transition_matrix(k) @ x
 
@@ -290,6 +289,7 @@ class _AbstractKinematic(AbstractTransitionModel):
         F1, _ = self._blocks(at_step(self.sample_period, k, 0))
         return _kron_diag(F1, jnp.ones((self.dim,), F1.dtype))
 
+    @affine_in_state
     def mean(self, x, k):
         return self.transition_matrix(k) @ x
 
@@ -350,8 +350,7 @@ class ConstantAcceleration(_AbstractKinematic):
         return _ca_blocks(tau)
 
 
-# --------------------------------------------------------------------------------------------
-# turn models
+# turn models --------------------------------------------------------------------------------
 
 
 class CoordinatedTurn(AbstractTransitionModel):
@@ -442,6 +441,7 @@ class CoordinatedTurn(AbstractTransitionModel):
         F = F.at[np.ix_(h, h)].set(F4)
         return F.at[np.ix_(v, v)].set(F1)
 
+    @affine_in_state
     def mean(self, x, k):
         return self.transition_matrix(k) @ x
 
@@ -552,8 +552,7 @@ class NearlyConstantTurn(AbstractTransitionModel):
         return Q.at[4, 4].set(self.turn_rate_intensity * tau)
 
 
-# --------------------------------------------------------------------------------------------
-# composition
+# composition --------------------------------------------------------------------------------
 
 
 class BlockTransition(AbstractTransitionModel):

@@ -25,7 +25,7 @@ def circular_error_probable(cov: ArrayLike, probability: float = 0.5, *, num_nod
 
     evaluated by ``num_nodes``-point Gauss–Legendre quadrature; ``P(R) = p`` is solved by 80
     bisection steps and one implicit-function Newton step, so the result is differentiable in
-    ``cov`` (``dR/dθ = −(∂P/∂θ)/(∂P/∂R)``). Circular case: ``R = sqrt(−2 ln(1 − p)) σ``, i.e.
+    ``cov`` (``dR/dθ = −(∂P/∂θ)/(∂P/∂R)``). Circular case: $R = \sqrt{−2 \ln(1 − p)}\, σ$, i.e.
     ``1.1774100 σ`` for ``p = 0.5``; the engineering approximation ``0.5887(σ_1 + σ_2)`` holds for
     ``σ_1/σ_2 ≳ 0.3`` (Layne & Blasch 1997 spec §2.9). Works under ``jit`` (value checks are then
     skipped).

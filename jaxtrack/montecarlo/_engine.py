@@ -26,8 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, PartitionSpec as P
 from jaxtyping import PRNGKeyArray, PyTree
-from tqdm.auto import tqdm
 
+from .._progress import tqdm
 from .._validation import InputError, as_key, is_concrete
 from ._sharding import RUN_AXIS, axis_size, local_value, place
 

@@ -24,6 +24,48 @@ from ..models import TrackingModel
 from ._metrics import chi2_mean_bounds
 
 
+class _StepSums(NamedTuple):
+    """One step's sums over the runs of a block (an entry of the scan's per-step output)."""
+
+    error: Array  # (n,)
+    squared_error: Array  # (n,)
+    nees: Array  # ()
+    nees_sq: Array  # ()
+    nis: Array  # ()
+    mode_probs: Array  # (K,): an IMM's mode probabilities (K = 0 for one filter)
+
+
+def _masked_sums(use, error, nees, nis, axis, modes=None):
+    """Sums over the runs (``axis`` of ``error``) where ``use``.
+
+    Each group of terms (errors and their squares; NEES, NEES², NIS; mode probabilities) is
+    stacked and summed by one product with the 0/1 weights (one kernel per group instead of a
+    reduction per term). The groups are kept apart so that under ``jax.grad`` of a statistic
+    of one group (an MSE) the others' tangents are dead code that JAX removes: in one product
+    the NEES/NIS tangents (through every run's Cholesky factors, each step) would be live and
+    transposed with zero cotangents (EKF Monte Carlo gradient of the MSE, 4,096 × 100: 2.05 →
+    0.87 s, 8.2 → 4.6 forward passes, compile 14 → 6 s). Excluded runs are zeroed first, not
+    only weighted, because an excluded run may hold NaN and NaN·0 is NaN. ``modes``:
+    ``(block, K)`` mode probabilities, or None. ``use`` None: the terms themselves,
+    ``(error, nees, nis, modes)``, for the caller to sum (``_Common.stacked``).
+    """
+    if use is None:
+        return error, nees, nis, modes
+    n = error.shape[0 if axis == -1 else 1]
+    if axis == 0:
+        error = error.T
+    weights = use.astype(error.dtype)
+
+    def total(terms):
+        return jnp.where(use[None, :], terms, 0.0) @ weights
+
+    errors = total(jnp.concatenate([error, error * error]))
+    scores = total(jnp.stack([nees, nees * nees, nis]))
+    K = 0 if modes is None else modes.shape[-1]
+    probs = total(modes.T) if K else jnp.zeros((0,), error.dtype)
+    return _StepSums(errors[:n], errors[n:], scores[0], scores[1], scores[2], probs)
+
+
 class _Sums(NamedTuple):
     """Per-step sums over the runs seen so far (all float64 under the default precision)."""
 
