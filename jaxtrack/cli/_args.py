@@ -9,16 +9,52 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import tempfile
 from pathlib import Path
 
 
+# reStructuredText inline markup, as the docstrings that some help texts come from write it:
+# a role (``:func:`~a.b.c` ``, ``:class:`x` ``), a literal (````x````) or interpreted text (```x```).
+_ROLE = re.compile(r":[a-zA-Z_]+(?::[a-zA-Z_]+)?:`(~?)([^`]*)`")
+_LITERAL = re.compile(r"``([^`]*)``")
+_INTERPRETED = re.compile(r"`([^`]*)`")
+
+
+def plain_text(text: str) -> str:
+    """``text`` without reStructuredText inline markup: what a terminal should show.
+
+    ``:func:`~jaxtrack.learning.fit` `` becomes ``fit`` (the ``~`` form shows the last name, as
+    Sphinx does), ``:func:`jaxtrack.learning.fit` `` the full name, ````x```` and ```x``` become
+    ``x``. Any backtick left over (unbalanced markup) is dropped.
+    """
+
+    def role(match: re.Match) -> str:
+        tilde, target = match.groups()
+        # A role with an explicit title (`title <target>`) shows the title.
+        target = re.sub(r"\s*<[^>]*>$", "", target)
+        return target.rsplit(".", 1)[-1] if tilde else target
+
+    text = _ROLE.sub(role, text)
+    text = _LITERAL.sub(r"\1", text)
+    text = _INTERPRETED.sub(r"\1", text)
+    return text.replace("`", "")
+
+
 class OneLineParser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose errors are one line on stderr (no usage block), status 2."""
+    """An ``ArgumentParser`` whose errors are one line on stderr (no usage block), status 2.
+
+    Its help is plain text: descriptions and argument help may come from docstrings, so the
+    reStructuredText markup is stripped here, in the one place every ``--help`` is formatted
+    (subcommand parsers are made by ``add_subparsers`` with the parent's class, so they share it).
+    """
 
     def error(self, message: str):  # noqa: D102 - argparse API
         raise ArgumentError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+    def format_help(self) -> str:  # noqa: D102 - argparse API
+        return plain_text(super().format_help())
 
 
 class ArgumentError(Exception):

@@ -12,6 +12,9 @@
   standard errors and confidence intervals from the observed information (:class:`MLEFit`).
 - ``_em``: :func:`fit_em`, expectation–maximisation (Shumway & Stoffer 1982) for
   ``LinearGaussianModel`` (F, H, Q, R, prior; each optionally fixed; masks; many runs): :class:`EMFit`.
+- ``_loop``: the one optimisation loop under :func:`fit`, :func:`fit_imm` and :func:`fit_em`
+  (iterations, stopping rule, histories, progress bar); L-BFGS, an optax transformation and the
+  EM M-step are its steppers.
 """
 
 from ._em import EMFit as EMFit, fit_em as fit_em

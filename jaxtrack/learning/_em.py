@@ -32,7 +32,8 @@ block-diagonal) ``R`` and also used for ``H``.
 What is ours: many recorded runs (statistics summed over runs, one vmapped smoother per run),
 the prior's placement (``first_step="predict"``: the prior sits one transition before the
 first measurement, handled by one prepended step without a measurement), a known transition
-offset ``b`` and fixed per-step matrices, and the whole iteration as one jitted ``lax.scan``.
+offset ``b`` and fixed per-step matrices, the whole iteration as one jitted ``lax.while_loop``
+and a stopping rule on the log-likelihood's relative change (``tol``).
 """
 
 from __future__ import annotations
@@ -50,10 +51,14 @@ from ..filters._base import FirstStep
 from ..filters._smoother import lag_one_covariances, rts_smoother
 from ..filters._updates import symmetrize
 from ..models._base import LinearGaussianModel
+from ._loop import Move, optimise, progress_bar, tick
 from ._runs import any_observed, prepare_runs, select
 
 # The EM parameters, in the order they are carried, and the model fields that hold them.
 _NAMES = ("F", "Q", "H", "R", "initial_mean", "initial_cov")
+# fit_em's default `tol`: a relative change of 1e-10 in ℓ is far below any statistical meaning
+# (ℓ ~ 10³–10⁵ nats: 10⁻⁷–10⁻⁵ nats) yet above the rounding of the E-step's sums.
+_DEFAULT_TOL = 1e-10
 _NDIM = {"F": 2, "Q": 2, "H": 2, "R": 2, "initial_mean": 1, "initial_cov": 2}
 
 
@@ -72,7 +77,10 @@ class EMFit(eqx.Module):
     - ``log_likelihood`` ``()``: the log-likelihood of the returned ``model`` (one more E-step
       after the last M-step), in nats.
     - ``num_steps_taken`` ``()`` int: the number of M-steps that led to ``model``
-      (``num_iterations`` unless the fit stopped).
+      (``num_iterations`` unless the fit converged or stopped at a failure). The E-steps run
+      are one more.
+    - ``converged`` ``()`` bool: the fit stopped because the log-likelihood's relative change
+      met ``tol`` (:func:`fit_em`), not at the iteration cap or a failure.
     - ``ok`` ``()`` bool: False if an iterate had a non-finite log-likelihood or invalid
       covariances (the fit then stopped and ``model`` is the last valid iterate).
     """
@@ -81,6 +89,7 @@ class EMFit(eqx.Module):
     log_likelihood_history: Float[Array, " I"]
     log_likelihood: Float[Array, ""]
     num_steps_taken: Int[Array, ""]
+    converged: Bool[Array, ""]
     ok: Bool[Array, ""]
 
 
@@ -221,31 +230,48 @@ def _m_step(params, stats, fixed, num_trans, num_meas):
     return F, Q, H, R, m0, P0
 
 
+class _EMStepper(eqx.Module):
+    """EM as a stepper of the shared loop (``_loop``): the next trial is the M-step of the last
+    E-step's statistics; a non-finite E-step fails the fit at the last valid iterate."""
+
+    fixed: tuple[str, ...] = eqx.field(static=True)
+    num_trans: int = eqx.field(static=True)
+    num_meas: int = eqx.field(static=True)
+
+    def init(self, params, aux_dtype):
+        return params  # the next parameters to evaluate
+
+    def trial(self, p_next, first):
+        return p_next, p_next
+
+    def advance(self, p_next, p, f, ll, stats, good, first):
+        # Symmetrised already; a non-finite M-step is caught by the next E-step's `ok`.
+        stepped = _m_step(p, stats, self.fixed, self.num_trans, self.num_meas)
+        return select(good, stepped, p_next), Move(good, p, ll, None, jnp.zeros((), bool), ~good)
+
+
 @eqx.filter_jit
-def _fit(base, params, z, obs, has_meas, fixed, num_iterations, num_meas):
+def _fit(base, params, z, obs, has_meas, fixed, num_iterations, num_meas, tol, progress):
     num_runs, L, _ = z.shape
     num_trans = num_runs * (L - 1)
     e_step = jax.vmap(_e_step, in_axes=(None, None, 0, 0, None))
 
-    def body(carry, i):
-        p, good_p, good_ll, accepted, ok = carry
+    def evaluate(p):
         lls, oks, stats = e_step(p, base, z, obs, has_meas)
         ll = jnp.sum(lls)
-        good = ok & jnp.all(oks) & jnp.isfinite(ll)
-        good_p = select(good, p, good_p)
-        good_ll = jnp.where(good, ll, good_ll)
-        accepted = jnp.where(good, i, accepted)
-        stepped = _m_step(p, stats, fixed, num_trans, num_meas)
-        # Symmetrised already; a non-finite M-step is caught by the next E-step's `ok`.
-        p_next = select(good & (i < num_iterations), stepped, good_p)
-        return (p_next, good_p, good_ll, accepted, good), good_ll
+        return -ll, ll, stats, jnp.all(oks) & jnp.isfinite(ll)
+
+    def converged_fn(ll1, ll, _):
+        # The relative change of the log-likelihood between consecutive iterates (fit_em's `tol`).
+        return jnp.abs(ll1 - ll) <= tol * jnp.abs(ll1)
 
     dtype = params[-1].dtype
-    init = (params, params, jnp.full((), jnp.nan, dtype), jnp.zeros((), jnp.int32), jnp.ones((), bool))
-    # num_iterations + 1 E-steps: iterates 0 … num_iterations, the last one only evaluated.
-    carry, history = jax.lax.scan(body, init, jnp.arange(num_iterations + 1, dtype=jnp.int32))
-    _, good_p, good_ll, accepted, ok = carry
-    return good_p, history[:-1], good_ll, accepted, ok
+    # num_iterations + 1 E-steps at most: iterates 0 … num_iterations, the last one only evaluated.
+    out = optimise(evaluate, params, _EMStepper(fixed, num_trans, num_meas), num_iterations, converged_fn, dtype,
+                   tick if progress else None)
+    # A non-finite start has no finite log-likelihood to report: NaN history.
+    history = jnp.where(out.start_ok, out.aux_history, jnp.nan)
+    return out.x, history[:-1], history[-1], out.num_steps, out.converged, out.ok
 
 
 def fit_em(
@@ -256,6 +282,8 @@ def fit_em(
     num_iterations: int = 50,
     fixed: Iterable[str] = ("H",),
     first_step: FirstStep = "update",
+    tol: float = _DEFAULT_TOL,
+    progress: bool = False,
 ) -> EMFit:
     """Fit ``F``, ``H``, ``Q``, ``R``, ``initial_mean``, ``initial_cov`` of a linear-Gaussian model by EM.
 
@@ -263,7 +291,16 @@ def fit_em(
     docstring: E-step, M-step, missing data, what is ours): each iteration runs the RTS smoother
     on every run at the current parameters, then replaces every parameter not in ``fixed`` by
     its closed-form maximiser. The measurement log-likelihood never decreases. The whole loop is
-    one jitted ``lax.scan``.
+    one jitted ``lax.while_loop`` (the learning module's one loop, shared with
+    :func:`~jaxtrack.learning.fit` and :func:`~jaxtrack.learning.fit_imm`); it stops after
+    ``num_iterations`` M-steps or as soon as the log-likelihood stops changing:
+
+    .. math::
+
+        |ℓ_i − ℓ_{i−1}| ≤ \\mathrm{tol}\\,|ℓ_i|,
+
+    with ``ℓ_i`` the total measurement log-likelihood of iterate ``i`` (after ``i`` M-steps); the
+    same relative-change rule as :func:`~jaxtrack.learning.fit`'s ``tol``.
 
     **Arguments:**
 
@@ -284,15 +321,20 @@ def fit_em(
     - ``first_step``: ``"update"`` (the prior is on the state at the first measurement; dynamax's
       convention) or ``"predict"`` (one transition before it), as in
       :func:`~jaxtrack.filters.run_filter`.
+    - ``tol``: stop when ``|ℓ_i − ℓ_{i−1}| ≤ tol·|ℓ_i|`` (dimensionless, ≥ 0; default
+      ``1e-10``). ``tol=0`` stops only when an iteration leaves ``ℓ`` exactly unchanged, i.e.
+      runs all ``num_iterations`` in practice (dynamax's ``fit_em`` has no stopping rule).
+    - ``progress``: show a tqdm bar of the iterations (from inside the jitted loop).
 
     **Returns:** an :class:`EMFit` (fitted model, ``log_likelihood_history`` ``(num_iterations,)``
-    before each M-step, the final ``log_likelihood``, ``num_steps_taken``, ``ok``).
+    before each M-step (entries after a stop repeat the final value), the final
+    ``log_likelihood``, ``num_steps_taken``, ``converged``, ``ok``).
 
     **Raises:** ``InputError`` naming the argument: ``model`` not a ``LinearGaussianModel``, with
     angle components, or with a free per-step parameter; ``fixed`` with an unknown name;
     ``measurements``/``mask`` of the wrong shape or step count (``mask`` not boolean), observed
-    non-finite measurements; ``num_iterations`` not an int ≥ 1; a wrong ``first_step``; a single
-    step (no transition) with ``F`` or ``Q`` free.
+    non-finite measurements; ``num_iterations`` not an int ≥ 1; ``tol`` negative or not a
+    number; a wrong ``first_step``; a single step (no transition) with ``F`` or ``Q`` free.
     """
     if isinstance(num_iterations, bool) or not isinstance(num_iterations, (int, np.integer)):
         raise InputError(f"`num_iterations` must be a Python int ≥ 1; got {num_iterations!r}.")
@@ -300,6 +342,12 @@ def fit_em(
         raise InputError(f"`num_iterations` must be ≥ 1; got {num_iterations}.")
     if first_step not in ("update", "predict"):
         raise InputError(f"`first_step` must be 'update' or 'predict'; got {first_step!r}.")
+    try:
+        tol = float(tol)
+    except (TypeError, ValueError):
+        raise InputError(f"`tol` must be a number ≥ 0; got {tol!r}.") from None
+    if not tol >= 0.0:  # also rejects NaN
+        raise InputError(f"`tol` must be ≥ 0; got {tol}.")
     fixed = _check_fixed(fixed)
     _check_model(model, fixed)
     z, obs = prepare_runs(model.meas_dim, model.initial_cov.dtype, measurements, mask)
@@ -330,13 +378,15 @@ def fit_em(
             "fit F or Q from; hold them fixed or use first_step='predict'."
         )
     params = tuple(getattr(base, k) for k in _NAMES)
-    fitted, history, ll, steps, ok = _fit(
-        base, params, z, obs, has_meas, fixed, int(num_iterations), num_runs * T
-    )
+    with progress_bar(bool(progress), int(num_iterations), "fit_em") as finish:
+        fitted, history, ll, steps, converged, ok = _fit(
+            base, params, z, obs, has_meas, fixed, int(num_iterations), num_runs * T, tol, bool(progress)
+        )
+        finish(steps)
     free = [k for k in _NAMES if k not in fixed]
     out = model
     if free:
         # Fixed arrays stay the input's own objects (bit for bit, per-step ones unpadded).
         out = eqx.tree_at(lambda md: tuple(getattr(md, k) for k in free), model,
                           tuple(fitted[_NAMES.index(k)] for k in free))
-    return EMFit(out, history, ll, steps, ok & any_observed(obs))
+    return EMFit(out, history, ll, steps, converged, ok & any_observed(obs))

@@ -23,14 +23,14 @@ normalised per track-step below); like the paper, ``θ`` may hold mode-transitio
 and measurement-noise parameters. What is
 ours: any optax optimiser (default Adam); every iteration uses the full batch of the given
 tracks (one deterministic objective, normalised per track-step, so the history is monotone up
-to the optimiser's own overshoot); the whole loop is one jitted ``lax.scan``; the
+to the optimiser's own overshoot); the whole loop is one jitted ``lax.while_loop``; the
 parametrisation is the caller's ``build`` (rows kept stochastic by
 :meth:`~jaxtrack.filters.InteractingMultipleModel.from_logits`, positive levels as ``exp`` of a
 real); and any jaxtrack member filter (KF, EKF, UKF, iterated EKF) and member model can be
 learned through, not only the paper's two motion modes.
 
 This is the IMM instance of maximum-likelihood learning by gradient; :func:`imm_log_likelihood`
-is the objective and :func:`fit_imm` the optimiser loop.
+is the objective and :func:`fit_imm` the optimiser loop (the learning module's one loop, ``_loop``, shared with :func:`~jaxtrack.learning.fit`).
 """
 
 from __future__ import annotations
@@ -47,7 +47,8 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 from .._validation import InputError, check_finite
 from ..filters._base import FirstStep
 from ..filters._imm import InteractingMultipleModel, run_imm
-from ._runs import all_finite as _all_finite, any_observed, check_params, prepare_runs, select as _select
+from ._loop import OptaxStepper, optimise
+from ._runs import all_finite as _all_finite, any_observed, check_params, prepare_runs
 
 # Built once so that the default does not create new closures (and a recompilation) per call.
 _DEFAULT_OPTIMIZER = optax.adam(1e-2)
@@ -168,38 +169,24 @@ def _fit(build, params, z, observed, optimizer, num_iterations, first_step, ll_d
 
     def objective(p):
         ll, ok = _track_log_likelihoods(build, p, z, observed, first_step)
-        # A fixed dtype for the scan carry (the models' dtype, whatever the params' dtype).
+        # A fixed dtype for the loop carry (the models' dtype, whatever the params' dtype).
         total = jnp.sum(ll).astype(ll_dtype)
         return -total * scale, (total, jnp.all(ok))
 
     value_and_grad = jax.value_and_grad(objective, has_aux=True)
-    nan = jnp.full((), jnp.nan, ll_dtype)
 
-    def body(carry, i):
-        p, opt_state, good_p, good_ll, good_gn, accepted, ok = carry
-        (_, (ll, imm_ok)), g = value_and_grad(p)
-        grad_ll = jax.tree_util.tree_map(lambda x: -x / scale, g)  # ∂ℓ/∂θ, for the diagnostic
-        gn = jnp.sqrt(sum(jnp.sum(x**2) for x in jax.tree_util.tree_leaves(grad_ll))).astype(ll_dtype)
-        good = ok & jnp.isfinite(ll) & imm_ok & _all_finite(g)
-        # Iterate i is accepted (finite); otherwise stop for good and fall back to the last
-        # accepted iterate, never handing non-finite parameters back.
-        good_p = _select(good, p, good_p)
-        good_ll = jnp.where(good, ll, good_ll)
-        good_gn = jnp.where(good, gn, good_gn)
-        accepted = jnp.where(good, i, accepted)
-        updates, new_state = optimizer.update(g, opt_state, p)
-        stepped = optax.apply_updates(p, updates)
-        step = good & (i < num_iterations)
-        p_next = _select(step, stepped, good_p)
-        state_next = _select(step, new_state, opt_state)
-        return (p_next, state_next, good_p, good_ll, good_gn, accepted, good), (good_ll, good_gn)
+    def evaluate(p):
+        (v, (ll, imm_ok)), g = value_and_grad(p)
+        return v, ll, g, jnp.isfinite(ll) & imm_ok & _all_finite(g)
 
-    init = (params, optimizer.init(params), params, nan, nan, jnp.zeros((), jnp.int32), jnp.ones((), bool))
-    # One scan of num_iterations + 1 evaluations: iterate 0 … num_iterations, the last without an
-    # update, so every returned iterate has a checked (finite) log-likelihood.
-    carry, (history, grad_norms) = jax.lax.scan(body, init, jnp.arange(num_iterations + 1, dtype=jnp.int32))
-    _, _, good_p, _, _, accepted, ok = carry
-    return good_p, history, grad_norms, accepted, ok
+    # The shared loop (_loop): iterates 0 … num_iterations, each with a checked (finite)
+    # log-likelihood; no stopping rule (every step is taken unless an evaluation fails, which
+    # stops the fit at the last finite iterate).
+    out = optimise(evaluate, params, OptaxStepper(optimizer), num_iterations, None, ll_dtype)
+    # A non-finite start has no finite log-likelihood to report: NaN histories.
+    history = jnp.where(out.start_ok, out.aux_history, jnp.nan)
+    grad_norms = jnp.where(out.start_ok, out.grad_norm_history / scale, jnp.nan).astype(ll_dtype)
+    return out.x, history, grad_norms, out.num_steps, out.ok
 
 
 def fit_imm(
@@ -218,7 +205,7 @@ def fit_imm(
     and what differs): gradient steps of an optax optimiser on ``−ℓ(θ)/(R·T)``, with
     ``ℓ(θ) = Σ_r run_imm(build(θ), z_r, mask=mask_r).log_likelihood`` the total log-likelihood of
     the ``R`` tracks (:func:`imm_log_likelihood`). The whole optimisation is one jitted
-    ``lax.scan`` over the iterations; ``build`` and ``optimizer`` are static (hashed by
+    ``lax.while_loop`` over the iterations (the loop shared with :func:`~jaxtrack.learning.fit`); ``build`` and ``optimizer`` are static (hashed by
     identity: pass the same objects to reuse the compilation).
 
     **Arguments:**

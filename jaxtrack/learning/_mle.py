@@ -62,26 +62,14 @@ from ..filters._base import AbstractFilter, FirstStep, check_run_arguments, run_
 from ..filters._kalman import KalmanFilter
 from ..models import AbstractStateSpaceModel
 from ._lbfgs import LBFGS
+from ._loop import OptaxStepper, grad_norm, optimise, progress_bar, tick
 from ._params import AbstractParametrisation, natural
-from ._runs import all_finite, any_observed, check_params, prepare_runs, select
+from ._runs import all_finite, any_observed, check_params, prepare_runs
 
 # L-BFGS (memory 10) with a strong-Wolfe line search, one objective evaluation per loop
 # iteration (_lbfgs: the compiled fit holds the objective once, not four times as with optax's).
 _DEFAULT_OPTIMIZER = LBFGS()
 _DEFAULT_FILTER = KalmanFilter()
-
-# The progress bar of the running fit (set by `fit`, ticked from inside the jitted loop through
-# jax.debug.callback): a module-level holder keeps the callback one function, so turning the bar
-# on does not recompile per call.
-_PROGRESS: dict[str, Any] = {"bar": None}
-
-
-def _tick(i, ll):
-    bar = _PROGRESS["bar"]
-    if bar is not None:
-        bar.update(int(i) - bar.n)
-        bar.set_postfix(log_likelihood=f"{float(ll):.6g}")
-
 
 def _run_log_likelihoods(build, params, filter, z, observed, first_step) -> tuple[Array, Array]:
     """Per-run ``log_likelihood`` ``(R,)`` and ``ok`` ``(R,)`` of ``build(params)``."""
@@ -100,10 +88,6 @@ def _total(build, params, filter, z, observed, first_step, ll_dtype):
     return jnp.sum(ll).astype(ll_dtype), jnp.all(ok)
 
 
-def _norm(tree) -> Array:
-    return jnp.sqrt(sum(jnp.sum(x**2) for x in jax.tree_util.tree_leaves(tree)))
-
-
 @eqx.filter_jit
 def _fit_loop(build, params, filter, z, observed, first_step, optimizer, num_iterations, tol, gradient_tol,
               ll_dtype, progress):
@@ -118,75 +102,36 @@ def _fit_loop(build, params, filter, z, observed, first_step, optimizer, num_ite
 
     value_and_grad = jax.value_and_grad(objective, has_aux=True)
 
-    def value_fn(p):  # for the line search: the same objective, value only
+    def value_fn(p):  # for optax's line searches: the same objective, value only
         return objective(p)[0]
 
     def evaluate(p):
         (v, (ll, ok)), g = value_and_grad(p)
-        gn = _norm(g).astype(ll_dtype)  # per run-step gradient norm
-        good = ok & jnp.isfinite(v) & all_finite(g)
-        return v, ll, g, gn, good
+        return v, ll, g, ok & jnp.isfinite(v) & all_finite(g)
+
+    def converged_fn(ll1, ll, g):
+        # Small per-run-step gradient, or ℓ stopped changing relative to itself.
+        return (grad_norm(g) <= gradient_tol) | (jnp.abs(ll1 - ll) <= tol * jnp.abs(ll1))
 
     if isinstance(optimizer, LBFGS):
+        # L-BFGS works on the flattened unconstrained leaves.
         flat0, unravel = ravel_pytree(params)
 
         def evaluate_flat(u):
-            v, ll, g, _, good = evaluate(unravel(u))
+            v, ll, g, good = evaluate(unravel(u))
             return v, ll, ravel_pytree(g)[0], good
 
-        def converged_fn(ll1, ll, g):
-            # The same rule as below: small per-run-step gradient, or ℓ stopped changing.
-            return (_norm(g) <= gradient_tol) | (jnp.abs(ll1 - ll) <= tol * jnp.abs(ll1))
-
-        u, hist, ghist, steps, converged, ok = optimizer.minimise(
-            evaluate_flat, flat0, num_iterations, converged_fn, ll_dtype, tick=_tick if progress else None
-        )
-        return unravel(u), hist, (ghist / scale).astype(ll_dtype), steps, converged, ok
-
-    v0, ll0, g0, gn0, good0 = evaluate(params)
-    nan = jnp.full((num_iterations + 1,), jnp.nan, ll_dtype)
-    conv0 = good0 & (gn0 <= gradient_tol)
-    init = (
-        jnp.zeros((), jnp.int32), params, optimizer.init(params), v0, ll0, g0,
-        nan.at[0].set(ll0), nan.at[0].set(gn0 / scale), good0 & ~conv0, conv0, good0,
-    )
-
-    def cond(c):
-        i, *_, running, _, _ = c
-        return running & (i < num_iterations)
-
-    def body(c):
-        i, p, state, v, ll, g, hist, ghist, _, _, _ = c
-        updates, new_state = optimizer.update(g, state, p, value=v, grad=g, value_fn=value_fn)
-        p_new = optax.apply_updates(p, updates)
-        v1, ll1, g1, gn1, good = evaluate(p_new)
-        i1 = i + 1
-        # Converged: the per-run-step gradient is small, or ℓ stopped changing relative to itself.
-        small_grad = gn1 <= gradient_tol
-        small_change = jnp.abs(ll1 - ll) <= tol * jnp.abs(ll1)
-        converged = good & (small_grad | small_change)
-        # A non-finite evaluation: stop, keeping the last finite iterate (never hand back NaN).
-        p_keep = select(good, p_new, p)
-        state_keep = select(good, new_state, state)
-        v_keep = jnp.where(good, v1, v)
-        ll_keep = jnp.where(good, ll1, ll)
-        g_keep = select(good, g1, g)
-        hist = hist.at[i1].set(ll_keep)
-        ghist = ghist.at[i1].set(jnp.where(good, gn1, ghist[i]) / jnp.where(good, scale, 1.0))
-        if progress:
-            jax.debug.callback(_tick, i1, ll_keep)
-        return (i1, p_keep, state_keep, v_keep, ll_keep, g_keep, hist, ghist,
-                good & ~converged, converged, good)
-
-    out = jax.lax.while_loop(cond, body, init)
-    i, p, _, _, ll, _, hist, ghist, _, converged, ok = out
-    # Entries past the last iteration repeat the final value (the fit stopped there).
-    idx = jnp.arange(num_iterations + 1)
-    hist = jnp.where(idx > i, ll, hist)
-    ghist = jnp.where(idx > i, ghist[i], ghist)
-    # Steps that led to the returned iterate: a failed last evaluation did not move it.
-    steps = jnp.where(ok, i, jnp.maximum(i - 1, 0))
-    return p, hist, ghist, steps, converged, ok
+        out = optimise(evaluate_flat, flat0, optimizer, num_iterations, converged_fn, ll_dtype,
+                       tick if progress else None)
+        fitted = unravel(out.x)
+    else:
+        # The start before the loop, as this path always did (same numbers either way).
+        stepper = OptaxStepper(optimizer, value_fn, start_outside=True)
+        out = optimise(evaluate, params, stepper, num_iterations, converged_fn, ll_dtype, tick if progress else None)
+        fitted = out.x
+    # The loop's norms are of ∂(−ℓ/(R·T))/∂u; the history reports ‖∂ℓ/∂u‖.
+    return fitted, out.aux_history, (out.grad_norm_history / scale).astype(ll_dtype), out.num_steps, \
+        out.converged, out.ok
 
 
 def _hessian_and_jacobian(build, params, filter, z, observed, first_step, ll_dtype):
@@ -444,25 +389,12 @@ def fit(
         z = z[:, None]
     z, observed = prepare_runs(model.meas_dim, model.initial_mean.dtype, z, mask)
     ll_dtype = jnp.result_type(model.initial_cov, z)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=int(num_iterations), desc="fit", unit="it")
-        _PROGRESS["bar"] = bar
-    try:
+    with progress_bar(bool(progress), int(num_iterations), "fit") as finish:
         fitted, hist, ghist, steps, converged, ok = _fit_loop(
             build, params, filter, z, observed, first_step, optimizer, int(num_iterations), float(tol),
             float(gradient_tol), ll_dtype, bool(progress),
         )
-        if bar is not None:
-            jax.block_until_ready(hist)
-            bar.total = int(steps)  # an early stop (converged or failed) ends the bar there
-            bar.refresh()
-    finally:
-        if bar is not None:
-            bar.close()
-            _PROGRESS["bar"] = None
+        finish(steps)
     # Built outside the loop so that the model's concrete checks run on the result.
     ok = ok & any_observed(observed)
     return MLEFit(fitted, build(fitted), hist, ghist, steps, converged, ok, filter, z, observed, build, first_step)
