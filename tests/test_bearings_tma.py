@@ -19,6 +19,7 @@ from jaxtrack.applications import bearings_tma as bt
 from jaxtrack.filters import KalmanFilter, run_filter
 from jaxtrack.models import LinearGaussianModel
 from jaxtrack.montecarlo import chi2_mean_bounds
+from rows_baseline import assert_rows_match_c1ffaca
 
 SIG = bt.AVERAGED_BEARING_STD
 
@@ -688,6 +689,7 @@ def test_reproduce_rows_all_pass_and_figures(tmp_path, capsys):
     assert {"V2", "V3", "V10", "V19", "V21", "V22", "V23", "V24", "V25", "V26", "V27", "V28", "V29", "V31"} <= ids
     failed = [r for r in rows if not r.ok]
     assert not failed, failed
+    assert_rows_match_c1ffaca("tma", rows)
     assert len(figures) == 8
     for path in figures:
         with open(path, "rb") as fh:

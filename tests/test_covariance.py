@@ -16,6 +16,10 @@ from jaxtrack.filters import KalmanFilter, run_filter
 from jaxtrack.models import NonlinearGaussianModel, ho_plant
 from jaxtrack.montecarlo import chi2_mean_bounds, monte_carlo
 
+# Long programs: compiled at XLA's default level (tests/conftest.py; alone, cold: 32.9 against 17.3
+# CPU-s)
+pytestmark = pytest.mark.xla_optimized
+
 TAUS = jnp.full(50, 0.1)  # uniform 0.1 s, 50 samples (T36, T37)
 
 
@@ -130,3 +134,10 @@ def test_ekf_error_means_T38():
     sem_upd = float(jnp.std(err_upd)) / np.sqrt(M)
     # Sample mean/cov of the prediction error are themselves estimates: allow 8 SEM.
     assert abs(float(jnp.mean(err_upd)) - float(expected_upd[0])) < 8 * sem_upd
+
+
+def test_this_module_compiles_at_the_default_level():
+    """pytest.mark.xla_optimized reached XLA (the fixture in tests/conftest.py)."""
+    from conftest import fast_compile
+
+    assert not fast_compile()

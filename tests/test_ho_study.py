@@ -1,10 +1,13 @@
 """Ho (1968) Sec. III-E and Sec. IV study: targets T16–T32 of specs/ho-sensitivity.md (internal values, tight)."""
 
+import pathlib
+
 import numpy as np
 import pytest
 
 from jaxtrack.applications import ho_sensitivity as ho
 from jaxtrack.sensitivity import Autodiff
+from rows_baseline import assert_rows_match_c1ffaca
 
 
 @pytest.mark.parametrize(
@@ -114,10 +117,17 @@ def test_T30_T31_T32_sec4_examples():
     assert ex3.r_x_needed == pytest.approx(0.84, abs=1e-12)
 
 
-def test_every_paper_row_passes():
-    rows = ho.paper_rows()
+def test_every_paper_row_passes_and_figures_are_written(tmp_path):
+    rows, figures = ho.reproduce(tmp_path)
     failing = [r for r in rows if not r.ok]
     assert not failing, failing
+    assert_rows_match_c1ffaca("ho", rows)
+    names = {pathlib.Path(f).name for f in figures}
+    assert {"fig07_covariance_1g.png", "fig08_segment_sensitivity_1g.png", "fig09_adjoint_1g.png"} <= names
+    assert any(n.startswith("fig13_") for n in names)
+    for path in figures:
+        with open(path, "rb") as fh:
+            assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
     ids = {r.id for r in rows}
     assert {f"T{i}" for i in (15, *range(16, 26), 28, 29, 30, 31, 32)} <= ids
 

@@ -29,6 +29,10 @@ from jaxtrack.multitarget import (
     simulate_scenarios,
 )
 
+# Long programs: compiled at XLA's default level (tests/conftest.py; alone, cold:
+# 77.7 against 50.6 CPU-s)
+pytestmark = pytest.mark.xla_optimized
+
 Q, SIGMA, P_D, RATE = 0.05, 1.0, 0.8, 1.0
 REGION = np.array([[0.0, 200.0], [0.0, 200.0]])
 VOLUME = 200.0 * 200.0

@@ -19,6 +19,7 @@ from jaxtrack.applications import obem_registration as ob
 from jaxtrack.estimation import observability, weighted_least_squares
 from jaxtrack.filters import KalmanFilter, condition_linearized, run_filter
 from jaxtrack.models import LinearGaussianModel
+from rows_baseline import assert_rows_match_c1ffaca
 
 DEG = np.pi / 180
 ALPHA = np.array([2.0, 1.0, 1.0]) * DEG  # the paper's (Δφ, Δη, Δψ)
@@ -655,6 +656,7 @@ def test_reproduce_rows_pass_and_figures_written(tmp_path):
     rows, figures = ob.reproduce(tmp_path)
     failed = [r for r in rows if not r.ok]
     assert not failed, failed
+    assert_rows_match_c1ffaca("registration", rows)
     ids = {r.id for r in rows}
     assert {"V1", "V3", "V8", "V10", "V11", "V13", "V14", "S1", "S2", "S3", "S4", "S5", "S6", "S7"} <= ids
     assert len(figures) == 6

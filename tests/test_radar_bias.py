@@ -19,6 +19,7 @@ from jaxtrack import InputError, geometry
 from jaxtrack.applications import radar_bias as rb
 from jaxtrack.covariance import covariance_recursion
 from jaxtrack.models import LinearGaussianModel
+from rows_baseline import assert_rows_match_c1ffaca
 
 S2 = np.sqrt(2.0)
 METHODS = ("compact", "paper", "kkt")
@@ -693,6 +694,7 @@ def test_reduced_state_model_input_errors():
 def test_reproduce_rows_pass_and_figures_are_written(tmp_path):
     rows, figures = rb.reproduce(tmp_path)
     assert [r for r in rows if not r.ok] == []
+    assert_rows_match_c1ffaca("bias", rows)
     ids = [r.id for r in rows]
     assert ids.count("V7") == 24 and ids.count("V8") == 4 and ids.count("V19") == 18
     assert len(figures) == 3

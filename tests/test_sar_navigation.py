@@ -15,6 +15,7 @@ import jaxtrack.models as ins
 from jaxtrack import InputError
 from jaxtrack.applications import sar_navigation as sn
 from jaxtrack.covariance import covariance_recursion
+from rows_baseline import assert_rows_match_c1ffaca
 
 KEY = jax.random.key(20260901)
 
@@ -392,6 +393,7 @@ def test_v22_to_v24_reproduce_rows_and_figures(reproduced):
     rows, figures = reproduced
     bad = [r for r in rows if not r.ok]
     assert not bad, bad
+    assert_rows_match_c1ffaca("sar", rows)
     ids = {r.id for r in rows}
     assert {"V-5b", "V-10", "V-16", "V-17", "V-18", "V-22", "V-23", "V-24"} <= ids
     assert sum(r.id == "V-24" for r in rows) >= 40
