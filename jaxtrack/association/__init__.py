@@ -10,6 +10,7 @@ strategy object:
 - ``_gating``: :func:`gate_threshold` (χ² gates), :func:`measurement_likelihoods` (any filter's
   update on every measurement of a scan), :func:`log_likelihood_ratios` (the matrix ``L``);
 - ``_assignment``: :func:`linear_assignment` (2-D assignment) and :class:`GNN`;
+- ``_murty``: :func:`k_best_assignments` (Murty's k best assignments over several cost matrices);
 - ``_jpda``: :class:`PDA`, :class:`JPDA` (exact marginals), :class:`LoopyBP` (belief propagation);
 - ``_pda_update``: :func:`pda_update`, the PDA/JPDA mixture collapse of the conditioned moments.
 """
@@ -27,6 +28,10 @@ from ._assignment import (
     GNN as GNN,
     linear_assignment as linear_assignment,
 )
+from ._murty import (
+    KBestAssignments as KBestAssignments,
+    k_best_assignments as k_best_assignments,
+)
 from ._jpda import (
     JPDA as JPDA,
     PDA as PDA,
@@ -42,6 +47,8 @@ __all__ = [
     "measurement_likelihoods",
     "GNN",
     "linear_assignment",
+    "KBestAssignments",
+    "k_best_assignments",
     "JPDA",
     "PDA",
     "LoopyBP",
