@@ -11,6 +11,11 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
   component budget) and :func:`run_phd`;
 - ``_cphd``: :class:`GMCPHD` (the Gaussian-mixture CPHD filter of Vo, Vo & Cantoni 2007: the
   GM-PHD's pieces plus a cardinality distribution up to ``N_max``) and :func:`run_cphd`;
+- ``_pmbm``: :class:`PMBM` (the Poisson multi-Bernoulli mixture filter of García-Fernández et al.
+  2018 with fixed track, hypothesis and Poisson budgets; Murty's ranked assignment), the shared
+  :class:`PMBMState`, and :func:`run_pmbm`;
+- ``_pmb``: :class:`PMB` (the track-oriented PMB filter of Williams 2015: the same step with the
+  association marginals of :mod:`jaxtrack.association`);
 - ``_learning``: :func:`fit_detection_and_clutter` (``P_D`` and the clutter density by maximum
   likelihood of the tracker's scan log-likelihood, with standard errors).
 """
@@ -50,6 +55,14 @@ from ._cphd import (
     GMCPHDStepInfo as GMCPHDStepInfo,
     run_cphd as run_cphd,
 )
+from ._pmbm import (
+    PMBM as PMBM,
+    PMBMResult as PMBMResult,
+    PMBMState as PMBMState,
+    PMBMStepInfo as PMBMStepInfo,
+    run_pmbm as run_pmbm,
+)
+from ._pmb import PMB as PMB
 from ._tracker import (
     CONFIRMED as CONFIRMED,
     EMPTY as EMPTY,
@@ -101,4 +114,10 @@ __all__ = [
     "CPHDState",
     "CPHDResult",
     "run_cphd",
+    "PMBM",
+    "PMB",
+    "PMBMState",
+    "PMBMStepInfo",
+    "PMBMResult",
+    "run_pmbm",
 ]
