@@ -2,7 +2,12 @@
 the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step and one scan.
 
 - ``_scenario``: :class:`Scenario`, :func:`simulate_scenario` / :func:`simulate_scenarios` (padded
-  scans with validity masks and the origin of every measurement);
+  scans with validity masks and the origin of every measurement; the truth drawn per run, or
+  fixed over the runs with ``truth_states``);
+- ``_named_scenarios``: :func:`crossing_targets` (the library's crossing targets before a
+  range–bearing radar) and :func:`williams15` (the coalescence scenario of Williams 2015 as
+  García-Fernández's PMBM reference defines it, with its fixed truth and the reference's filter
+  settings, :class:`Williams15Settings`);
 - ``_tracker``: :class:`TrackTable`, :class:`Tracker` (association method as a strategy),
   :func:`run_tracker`;
 - ``_evaluation``: :func:`score_tracks` (GOSPA per scan, track counts) and
@@ -27,9 +32,13 @@ from ._scenario import (
     MultiTargetTrajectory as MultiTargetTrajectory,
     Scan as Scan,
     Scenario as Scenario,
-    crossing_targets as crossing_targets,
     simulate_scenario as simulate_scenario,
     simulate_scenarios as simulate_scenarios,
+)
+from ._named_scenarios import (
+    Williams15Settings as Williams15Settings,
+    crossing_targets as crossing_targets,
+    williams15 as williams15,
 )
 from ._evaluation import (
     TrackerMonteCarloResult as TrackerMonteCarloResult,
@@ -85,6 +94,8 @@ __all__ = [
     "Scan",
     "Scenario",
     "crossing_targets",
+    "williams15",
+    "Williams15Settings",
     "simulate_scenario",
     "simulate_scenarios",
     "CONFIRMED",

@@ -5,6 +5,10 @@ state-space model and differ by their initial states and their lifetimes, a dete
 a Poisson clutter rate and the box in measurement space over which clutter is uniform.
 :func:`simulate_scenario` draws one run of truth and scans from a key, :func:`simulate_scenarios`
 a batch of runs (run ``i`` from ``jax.random.fold_in(key, i)``, as the single-target Monte Carlo).
+With ``truth_states`` the scenario carries one fixed truth, shared by every run; only the
+detections, the measurement noise and the clutter are drawn per run. The named scenarios
+(:func:`~jaxtrack.multitarget.crossing_targets`, :func:`~jaxtrack.multitarget.williams15`) are
+built in :mod:`jaxtrack.multitarget._named_scenarios`.
 
 **A scan is a padded array, a mask and an origin** (``/shared/STYLE-multitarget.md``, point 1): a
 :class:`Scan` holds ``max_measurements`` slots; the detections of the targets come first, in
@@ -26,7 +30,8 @@ each stream has its own key words, ``W(s, j) = threefry2x32(key, counter=(s, j))
 - target ``j``'s noise at step ``k``: the ``n + m`` standard normals of the single-target
   simulator, ``step_normals(W(TARGET_STREAM, j), k, n + m)`` (as
   :func:`jaxtrack.montecarlo.simulate_step` draws them): plant noise from the first ``n``,
-  measurement noise from the last ``m``;
+  measurement noise from the last ``m`` (with a fixed truth the first ``n`` are drawn and not
+  used, so the measurement noise is the same numbers as without it);
 - target ``j``'s detection at step ``k``: the uniform with Threefry counter ``(k, j)`` under
   ``W(DETECTION_STREAM, 0)``;
 - the clutter count at step ``k``: the uniform with counter ``(k, 0)`` under
@@ -40,7 +45,6 @@ Keys must use JAX's default Threefry implementation (as for :func:`jaxtrack.mont
 
 from __future__ import annotations
 
-import math
 import warnings
 
 import equinox as eqx
@@ -51,7 +55,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, PRNGKeyArray
 
 from .._validation import InputError, as_key, check_finite, check_shape, is_concrete
 from ..filters._linalg import matmul
-from ..models import AbstractStateSpaceModel, ConstantVelocity, RangeBearing, TrackingModel, at_step
+from ..models import AbstractStateSpaceModel, at_step
 from ..montecarlo._noise import key_words, step_normals, threefry2x32
 from ..montecarlo._simulate import noise_factors
 
@@ -62,7 +66,6 @@ __all__ = [
     "MultiTargetTrajectory",
     "Scan",
     "Scenario",
-    "crossing_targets",
     "simulate_scenario",
     "simulate_scenarios",
 ]
@@ -102,12 +105,20 @@ class Scenario(eqx.Module):
     Willett & Tian 2011, *Tracking and Data Fusion*, §3.4; Mahler 2007, §12.3). The model's prior
     (``initial_mean``, ``initial_cov``) is not used by the simulation; a tracker may use it.
 
+    **A fixed truth.** With ``truth_states`` (``(T, N, n)``) the targets are not moved: every
+    run takes its states from ``truth_states`` (the same truth in every run, as in studies that
+    draw the trajectories once and redraw only the measurements over the Monte Carlo runs, e.g.
+    García-Fernández et al. 2018, Sec. VI). The lifetimes, detections, measurement noise and
+    clutter are drawn per run as without it, from the same streams (module docstring), so
+    ``truth_states = simulate_scenario(s, key).states`` reproduces that run's scans exactly.
+
     **Arguments:**
 
     - ``model``: an :class:`~jaxtrack.models.AbstractStateSpaceModel` with ``n`` states and ``m``
       measurement components (time-invariant, or per step with ``num_steps`` steps).
     - ``initial_states``: ``(N, n)``, each target's state at its birth step, in the model's units
-      (``N = max_targets``).
+      (``N = max_targets``); ``None`` when ``truth_states`` is given (it is then read from
+      ``truth_states`` at the birth steps).
     - ``birth_step``, ``death_step``: ``(N,)`` integers, ``0 <= birth_step < death_step``; the death
       step is exclusive. A slot with ``birth_step >= num_steps`` is never alive (a padded slot).
     - ``detection_probability``: ``P_D`` in ``[0, 1]``, a scalar, one per target ``(N,)`` or one
@@ -118,10 +129,15 @@ class Scenario(eqx.Module):
     - ``max_measurements``: the slots of a scan (static int, ``>= 1``).
     - ``num_steps``: ``T``, the steps of a run (static int, ``>= 1``).
     - ``process_noise``: draw the truth with the model's plant noise (default) or move the
-      targets with the noise-free transition (static bool).
+      targets with the noise-free transition (static bool; not used with ``truth_states``).
+    - ``truth_states``: optional ``(T, N, n)``, concrete and finite, in the model's units: the
+      states of every target at every step, used by every run instead of propagating
+      ``initial_states``. The entries of a target outside its lifetime are kept as given but never
+      measured (read ``alive``). Default ``None``: the truth is drawn per run.
 
     **Fields:** the arguments, with ``detection_probability`` broadcast to ``(T, N)``, the steps as
-    int32 and the floats in the model's dtype.
+    int32 and the floats in the model's dtype; ``initial_states`` is filled from ``truth_states``
+    (at step ``min(birth_step, T − 1)``) when that is given.
 
     **Raises:** ``InputError`` naming the argument for a wrong type, shape or value.
     """
@@ -133,6 +149,7 @@ class Scenario(eqx.Module):
     detection_probability: Float[Array, "T N"]
     clutter_rate: Float[Array, ""]
     clutter_region: Float[Array, "m 2"]
+    truth_states: Float[Array, "T N n"] | None
     max_measurements: int = eqx.field(static=True)
     num_steps: int = eqx.field(static=True)
     process_noise: bool = eqx.field(static=True)
@@ -140,7 +157,7 @@ class Scenario(eqx.Module):
     def __init__(
         self,
         model: AbstractStateSpaceModel,
-        initial_states: ArrayLike,
+        initial_states: ArrayLike | None,
         birth_step: ArrayLike,
         death_step: ArrayLike,
         *,
@@ -150,6 +167,7 @@ class Scenario(eqx.Module):
         max_measurements: int,
         num_steps: int,
         process_noise: bool = True,
+        truth_states: ArrayLike | None = None,
     ):
         if not isinstance(model, AbstractStateSpaceModel):
             raise InputError(f"`model` must be a jaxtrack state-space model (e.g. TrackingModel); got {type(model).__name__}.")
@@ -163,15 +181,34 @@ class Scenario(eqx.Module):
         dtype = model.initial_mean.dtype
         n, m = model.state_dim, model.meas_dim
 
-        x0 = jnp.asarray(initial_states, dtype)
-        check_shape("initial_states", x0, [(None, n)])
-        if x0.shape[0] < 1:
-            raise InputError("`initial_states` must hold at least one target; got shape (0, n).")
-        check_finite("initial_states", x0)
-        N = x0.shape[0]
+        if truth_states is None:
+            if initial_states is None:
+                raise InputError("`initial_states` is required (shape (N, n)) unless `truth_states` is given.")
+            truth = None
+            x0 = jnp.asarray(initial_states, dtype)
+            check_shape("initial_states", x0, [(None, n)])
+            if x0.shape[0] < 1:
+                raise InputError("`initial_states` must hold at least one target; got shape (0, n).")
+            check_finite("initial_states", x0)
+        else:
+            if initial_states is not None:
+                raise InputError(
+                    "`initial_states` must be None when `truth_states` is given (the initial states are "
+                    "`truth_states` at the birth steps)."
+                )
+            truth = _concrete_floats("truth_states", truth_states)
+            check_shape("truth_states", truth, [(num_steps, None, n)])
+            if truth.shape[1] < 1:
+                raise InputError(f"`truth_states` must hold at least one target; got shape {truth.shape}.")
+            check_finite("truth_states", truth)
+            truth = jnp.asarray(truth, dtype)
+            x0 = None
+        N = x0.shape[0] if truth is None else truth.shape[1]
 
         birth = _concrete_steps("birth_step", birth_step, N)
         death = _concrete_steps("death_step", death_step, N)
+        if truth is not None:
+            x0 = truth[np.minimum(birth, num_steps - 1), np.arange(N)]
         if np.any(birth < 0):
             j = int(np.flatnonzero(birth < 0)[0])
             raise InputError(f"`birth_step` must be >= 0; target {j} has {birth[j]}.")
@@ -214,6 +251,7 @@ class Scenario(eqx.Module):
         self.detection_probability = jnp.asarray(np.broadcast_to(pd, (num_steps, N)), dtype)
         self.clutter_rate = jnp.asarray(rate, dtype)
         self.clutter_region = jnp.asarray(region, dtype)
+        self.truth_states = truth
         self.max_measurements = max_measurements
         self.num_steps = num_steps
         self.process_noise = bool(process_noise)
@@ -263,7 +301,8 @@ class MultiTargetTrajectory(eqx.Module):
     **Fields:**
 
     - ``states``: ``(T, N, n)``, each target's state, in the model's units. Before its birth a slot
-      holds its initial state, after its death its last state; read ``alive``.
+      holds its initial state, after its death its last state (with the scenario's
+      ``truth_states``: those states, as given); read ``alive``.
     - ``alive``: ``(T, N)`` bool, ``birth_step <= k < death_step``.
     - ``detected``: ``(T, N)`` bool, alive and detected (never True for a target not alive).
     - ``target_measurements``: ``(T, N, m)``, ``h_k(x_k) + v_k`` drawn for every target and step,
@@ -357,12 +396,15 @@ def _simulate_one(scenario: Scenario, key) -> MultiTargetTrajectory:
 
     def step(x_prev, k):
         eps = step_normals(words, k, n + m, dtype)  # (n + m, N): targets on the trailing axis
-        moved = jax.vmap(model.transition, in_axes=(0, None))(x_prev, k)
-        if scenario.process_noise:
-            moved = moved + matmul(at_step(factors.process, k, 2), eps[:n]).T
-        # Born exactly at the given state; frozen after death (the slot keeps its last state).
-        x = jnp.where((k <= scenario.birth_step)[:, None], scenario.initial_states,
-                      jnp.where((k >= scenario.death_step)[:, None], x_prev, moved))
+        if scenario.truth_states is not None:
+            x = scenario.truth_states[k]  # the fixed truth; eps[:n] is drawn and not used
+        else:
+            moved = jax.vmap(model.transition, in_axes=(0, None))(x_prev, k)
+            if scenario.process_noise:
+                moved = moved + matmul(at_step(factors.process, k, 2), eps[:n]).T
+            # Born exactly at the given state; frozen after death (the slot keeps its last state).
+            x = jnp.where((k <= scenario.birth_step)[:, None], scenario.initial_states,
+                          jnp.where((k >= scenario.death_step)[:, None], x_prev, moved))
         z = jax.vmap(model.measurement, in_axes=(0, None))(x, k) + matmul(at_step(factors.measurement, k, 2), eps[n:]).T
         return x, (x, z)
 
@@ -493,92 +535,6 @@ def _warn_on_overflow(out: MultiTargetTrajectory, max_measurements: int) -> None
         f"Read `scans.num_dropped`, or raise `max_measurements`.",
         CapacityWarning,
         stacklevel=3,
-    )
-
-
-def crossing_targets(
-    num_targets: int = 4,
-    num_steps: int = 100,
-    sample_period: float = 1.0,
-    *,
-    centre_range: float = 5_000.0,
-    speed: float = 20.0,
-    miss_distance: float = 50.0,
-    noise_intensity: float = 0.01,
-    noise_std: tuple[float, float] = (10.0, 0.002),
-    detection_probability: float = 0.9,
-    clutter_rate: float = 10.0,
-    max_measurements: int | None = None,
-    staggered: bool = True,
-) -> Scenario:
-    """The standard test scenario: targets crossing near the centre of a range–bearing radar's field.
-
-    A 2-D radar at the origin (:class:`~jaxtrack.models.RangeBearing`, ``z = [r, φ]``, bearing
-    counter-clockwise from +x) watches the sector ``r ∈ [0, 2·centre_range]``,
-    ``φ ∈ [−π/4, π/4]``. Target ``j`` of ``N`` moves with nearly constant velocity
-    (:class:`~jaxtrack.models.ConstantVelocity`, state ``[x, y, vx, vy]``) at ``speed`` along the
-    heading ``π j / N``, on a line passing the field's centre ``(centre_range, 0)`` at the signed
-    perpendicular offset ``miss_distance·(j/(N−1) − 1/2)``; without plant noise it passes the
-    closest point at step ``num_steps/2``, so every pair of paths crosses near the centre around
-    the middle of the run. With ``staggered`` (default) the births are spread over the first fifth
-    of the run and the deaths over the last fifth (``birth_j = ⌊0.2 T j / N⌋``,
-    ``death_j = T − birth_j``); otherwise every target lives for the whole run. ``P_D`` is the same
-    for every target and step; clutter is ``Poisson(clutter_rate)`` per scan, uniform over the
-    sector in range and bearing.
-
-    **Arguments:**
-
-    - ``num_targets``: ``N``; ``num_steps``: ``T``; ``sample_period``: τ, seconds (> 0).
-    - ``centre_range``: m; ``speed``: m/s; ``miss_distance``: m.
-    - ``noise_intensity``: the CV model's ``q``, m²/s³; ``noise_std``: ``(σ_r, σ_φ)``, m and rad.
-    - ``detection_probability``, ``clutter_rate``: ``P_D`` and ``λ`` (defaults 0.9 and 10).
-    - ``max_measurements``: the scan's slots; default ``N + ⌈λ + 8√λ⌉ + 8``, for which an
-      overflow has probability below 1e-14 per scan (the clutter alone exceeds it with
-      probability 5e-16 at λ = 10, at most 2e-15 for 0 < λ ≤ 1000).
-    - ``staggered``: stagger the births and deaths (default True).
-
-    **Returns:** a :class:`Scenario`. Its model's prior (mean at the centre, standard deviations
-    1 km and ``2·speed``) is a broad birth prior for a tracker; the simulation does not use it.
-
-    **Raises:** ``InputError`` naming the argument for a non-positive count, period or range.
-    """
-    num_targets = _positive_int("num_targets", num_targets)
-    num_steps = _positive_int("num_steps", num_steps)
-    for name, value in (("sample_period", sample_period), ("centre_range", centre_range), ("speed", speed)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise InputError(f"`{name}` must be a positive finite number; got {value!r}.")
-    if max_measurements is None:
-        max_measurements = num_targets + math.ceil(clutter_rate + 8.0 * math.sqrt(max(clutter_rate, 0.0))) + 8
-    tau = float(sample_period)
-    model = TrackingModel(
-        ConstantVelocity(tau, noise_intensity=noise_intensity, dim=2),
-        RangeBearing(noise_std=noise_std, sensor_position=(0.0, 0.0)),
-        initial_mean=np.array([centre_range, 0.0, 0.0, 0.0]),
-        initial_cov=np.diag([1e3**2, 1e3**2, (2 * speed) ** 2, (2 * speed) ** 2]),
-    )
-    j = np.arange(num_targets)
-    if staggered:
-        birth = np.floor(0.2 * num_steps * j / num_targets).astype(np.int64)
-        death = num_steps - birth
-    else:
-        birth = np.zeros(num_targets, np.int64)
-        death = np.full(num_targets, num_steps, np.int64)
-    heading = np.pi * j / num_targets
-    direction = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-    normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
-    offset = miss_distance * (j / max(num_targets - 1, 1) - 0.5) if num_targets > 1 else np.zeros(1)
-    # Position at birth: back along the heading by the distance flown until the middle step.
-    centre = np.array([centre_range, 0.0])
-    back = speed * tau * (0.5 * num_steps - birth)
-    position = centre + offset[:, None] * normal - back[:, None] * direction
-    initial_states = np.concatenate([position, speed * direction], axis=-1)
-    return Scenario(
-        model, initial_states, birth, death,
-        detection_probability=detection_probability,
-        clutter_rate=clutter_rate,
-        clutter_region=np.array([[0.0, 2.0 * centre_range], [-np.pi / 4, np.pi / 4]]),
-        max_measurements=max_measurements,
-        num_steps=num_steps,
     )
 
 
