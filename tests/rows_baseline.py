@@ -40,7 +40,11 @@ STUDY_RTOL = {"tma": 5e-9}
 # only's V25 at 480 s by 1.6e-8 (the rest of its rows ≤ 2.3e-9). Under -O0 those two studies are
 # held to about 3x what was measured; at the default level (JAXTRACK_TEST_XLA_DEFAULT=1) to the
 # values above.
-O0_STUDY_RTOL = {"registration": 5e-9, "tma": 5e-8}
+# The SAR study's INS error rows at 600 s (V-17, V-18: a 15-state covariance spanning 15 decades)
+# held 7e-14 on the machine that measured the above and moved by 2.1e-12 at -O0 on an AMD EPYC
+# (fresh clone, 2026-12-05): the CPU's vector width changes which products XLA's -O0 code
+# contracts. Held to 1e-11 under -O0, 1e-12 at the default level.
+O0_STUDY_RTOL = {"registration": 5e-9, "tma": 5e-8, "sar": 1e-11}
 # Registration's V8 is a bias- and noise-free residual, zero in exact arithmetic: 2.1e-9 m at
 # c1ffaca, 1.4e-9 m at -O0. It is held to |value| ≤ 1e-8 m under -O0, not relative to c1ffaca.
 O0_ZERO_ROWS = {("registration", "V8", "max |Z| bias- and noise-free [m] in [0, 1e-06]")}

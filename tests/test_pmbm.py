@@ -14,6 +14,7 @@ import math
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -191,7 +192,8 @@ _STEP = eqx.filter_jit(lambda f, s, zk, vk: f.step(s, zk, vk))
 
 @pytest.fixture(scope="module")
 def pmbm_states():
-    pmbm = PMBM(KalmanFilter(), _model(), max_hypotheses=H_MAX, **_kwargs())
+    pmbm = PMBM(KalmanFilter(), _model(), max_hypotheses=H_MAX, assignment_rows=M_MAX, assignment_tracks=N_MAX,
+                **_kwargs())
     z, valid = _scans()
     state = pmbm.init()
     states = []
@@ -242,3 +244,27 @@ def test_input_errors():
         PMB(KalmanFilter(), _model(), associator="jpda", **_kwargs())
     with pytest.raises(InputError, match="mb"):
         run_pmbm("pmbm", *_scans())
+
+
+def test_pmb_gradient_through_soft_marginals_matches_central_differences():
+    """d(expected number of targets after 3 scans)/d(P_D, κ, birth weight) of the PMB with loopy
+    BP marginals (smooth in all three: no pruning, no threshold near any r) by jax.grad and by
+    central differences."""
+    from jaxtrack.association import LoopyBP
+
+    z, valid = _scans()
+
+    def card(pd, kappa, bw):
+        pmb = PMB(KalmanFilter(), _model(), associator=LoopyBP(num_iters=30),
+                  **_kwargs(prob_detect=pd, clutter_density=kappa, birth_weights=jnp.reshape(bw, (1,))))
+        return run_pmbm(pmb, z, valid, warn=False).expected_cardinality[-1]
+
+    x0 = (PD, KAPPA, BIRTH_W)
+    grads = jax.jit(jax.grad(card, argnums=(0, 1, 2)))(*map(jnp.asarray, x0))
+    f = jax.jit(card)
+    for i, g in enumerate(grads):
+        h = 1e-5 * x0[i]
+        plus = float(f(*[x + (h if j == i else 0.0) for j, x in enumerate(x0)]))
+        minus = float(f(*[x - (h if j == i else 0.0) for j, x in enumerate(x0)]))
+        fd = (plus - minus) / (2 * h)
+        assert abs(fd) > 1e-6 and abs(float(g) - fd) <= 1e-6 * abs(fd), (i, float(g), fd)

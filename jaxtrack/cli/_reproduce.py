@@ -21,6 +21,9 @@ STUDIES = {
                     "Maneuvering target: CV, CT and IMM filters, IMM smoother, learned IMM (own scenario; claims with margins)"),
     "multitarget": ("jaxtrack.applications.multitarget",
                     "Crossing targets in clutter: GNN, JPDA and JIPDA trackers (own scenario; claims with margins)"),
+    "williams15": ("jaxtrack.applications.williams15",
+                   "Williams 2015 scenario: GM-PHD, GM-CPHD, PMB, PMBM and the JPDA tracker (reference scenario; "
+                   "claims with margins)"),
 }
 
 
@@ -36,6 +39,8 @@ NEEDS_FLOAT64 = {
            "float32 (specs/bearings-tma.md §3.5 item 6)",
     "maneuvering": "its claims are calibrated in float64; the gradient fit of the IMM's parameters "
                    "differences log-likelihoods of order 1e3 nats (not measured in float32)",
+    "williams15": "its claims are calibrated in float64; the CPHD's cardinality recursion and the PMBM's "
+                  "hypothesis weights are summed in log space over many orders of magnitude (not measured in float32)",
     "multitarget": "its claims are calibrated in float64; the trackers' 3 km initiation prior and the "
                    "2 mrad bearing noise span 7 decades in one covariance (not measured in float32)",
 }

@@ -16,9 +16,10 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
   component budget) and :func:`run_phd`;
 - ``_cphd``: :class:`GMCPHD` (the Gaussian-mixture CPHD filter of Vo, Vo & Cantoni 2007: the
   GM-PHD's pieces plus a cardinality distribution up to ``N_max``) and :func:`run_cphd`;
+- ``_multibernoulli``: :class:`PMBMState` and what the PMBM and PMB filters share, and
+  :func:`run_pmbm`;
 - ``_pmbm``: :class:`PMBM` (the Poisson multi-Bernoulli mixture filter of García-Fernández et al.
-  2018 with fixed track, hypothesis and Poisson budgets; Murty's ranked assignment), the shared
-  :class:`PMBMState`, and :func:`run_pmbm`;
+  2018 with fixed track, hypothesis and Poisson budgets; Murty's ranked assignment);
 - ``_pmb``: :class:`PMB` (the track-oriented PMB filter of Williams 2015: the same step with the
   association marginals of :mod:`jaxtrack.association`);
 - ``_learning``: :func:`fit_detection_and_clutter` (``P_D`` and the clutter density by maximum
@@ -64,13 +65,13 @@ from ._cphd import (
     GMCPHDStepInfo as GMCPHDStepInfo,
     run_cphd as run_cphd,
 )
-from ._pmbm import (
-    PMBM as PMBM,
+from ._multibernoulli import (
     PMBMResult as PMBMResult,
     PMBMState as PMBMState,
     PMBMStepInfo as PMBMStepInfo,
     run_pmbm as run_pmbm,
 )
+from ._pmbm import PMBM as PMBM
 from ._pmb import PMB as PMB
 from ._tracker import (
     CONFIRMED as CONFIRMED,

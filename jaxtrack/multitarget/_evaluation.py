@@ -135,10 +135,11 @@ class TrackerMonteCarloResult(eqx.Module):
       ``mean ± 1.96 s/√R``).
     - ``localisation``, ``missed``, ``false`` ``(T,)``: the means of GOSPA's parts (units to the
       power ``p``); ``num_targets``, ``num_tracks`` ``(T,)``: mean numbers of alive targets and of
-      confirmed tracks.
+      confirmed tracks (a random-finite-set filter's estimates).
     - ``scores``: the :class:`TrackScores` averaged over runs (floats).
     - ``scans_overflowed``, ``births_dropped``: totals over all runs (ints): scans that held more
-      than ``max_measurements`` and track births refused for want of table slots.
+      than ``max_measurements`` and capacity events: track births refused for want of table
+      slots (a tracker), or the filter's capacity events (see :func:`tracker_monte_carlo`).
     - ``num_runs``, ``cutoff``, ``order``: what was run.
     """
 
@@ -161,14 +162,35 @@ class TrackerMonteCarloResult(eqx.Module):
         return float(np.mean(self.gospa))
 
 
+def _method_estimates(method, measurements, valid):
+    """A method's estimates over one run, as ``(states (T, K, n), reported (T, K), ids (T, K),
+    capacity_events ())``: a tracker's confirmed tracks, a GM-PHD's or GM-CPHD's extracted
+    estimates (no labels: the slot index stands for the id), a PMBM's or PMB's estimated tracks."""
+    from ._cphd import GMCPHD, _run_cphd
+    from ._multibernoulli import _run as _run_mb
+    from ._phd import GMPHD, _run_phd
+
+    if isinstance(method, Tracker):
+        r = _run_tracker(method, measurements, valid, False)
+        return r.mean, r.status == CONFIRMED, r.track_id, r.final.num_dropped_births
+    if isinstance(method, (GMPHD, GMCPHD)):
+        r = (_run_phd if isinstance(method, GMPHD) else _run_cphd)(method, measurements, valid)
+        slots = jnp.broadcast_to(jnp.arange(r.estimate_mask.shape[1], dtype=jnp.int32), r.estimate_mask.shape)
+        return r.estimates, r.estimate_mask, slots, jnp.sum(r.num_dropped)
+    r = _run_mb(method, measurements, valid)
+    fs = r.final
+    events = fs.num_dropped_tracks + fs.poisson_num_dropped + fs.assignment_overflow + jnp.sum(~r.association_ok)
+    return r.estimates, r.estimate_mask, r.estimate_id, events
+
+
 def _one_run(key, args):
     tracker, scenario, target_idx, track_idx, cutoff, order = args
     truth = _simulate_one(scenario, key)
-    result = _run_tracker(tracker, truth.scans.measurements, truth.scans.valid, False)
-    confirmed = result.status == CONFIRMED
+    est, reported, ids, events = _method_estimates(tracker, truth.scans.measurements, truth.scans.valid)
+    confirmed = reported
     g, scores = score_tracks(
-        truth.states[..., target_idx], truth.alive, result.mean[..., track_idx], confirmed,
-        result.track_id, cutoff=cutoff, order=order,
+        truth.states[..., target_idx], truth.alive, est[..., track_idx], confirmed,
+        ids, cutoff=cutoff, order=order,
     )
     return {
         "gospa": g.distance,
@@ -180,7 +202,7 @@ def _one_run(key, args):
         "num_tracks": jnp.sum(confirmed, axis=1),
         "scores": scores,
         "scans_overflowed": jnp.sum(truth.scans.overflow),
-        "births_dropped": result.final.num_dropped_births,
+        "births_dropped": events,
     }
 
 
@@ -195,18 +217,22 @@ def tracker_monte_carlo(
     block_size: int = 64,
     progress: bool = False,
 ) -> TrackerMonteCarloResult:
-    """Monte Carlo of a tracker on a scenario: mean GOSPA per scan with its parts, track counts.
+    """Monte Carlo of a tracker or a random-finite-set filter on a scenario: mean GOSPA per scan
+    with its parts, track counts.
 
     Run ``i`` simulates ``scenario`` from ``fold_in(key, i)`` (exactly
     ``simulate_scenario(scenario, fold_in(key, i))``), runs ``tracker`` over its scans
-    (:func:`run_tracker`) and scores the confirmed tracks' positions against the alive targets'
-    (:func:`score_tracks`). Runs go through :func:`jaxtrack.montecarlo.monte_carlo_map` in blocks
+    (:func:`run_tracker`, :func:`run_phd`, :func:`run_cphd` or :func:`run_pmbm`) and scores its
+    estimates' positions against the alive targets' (:func:`score_tracks`): a tracker's confirmed
+    tracks, a PMBM's or PMB's estimated tracks (with their ids), a GM-PHD's or GM-CPHD's
+    extracted estimates (unlabelled, so their track-level counts are not meaningful). Runs go through :func:`jaxtrack.montecarlo.monte_carlo_map` in blocks
     of ``block_size`` vmapped runs (one compilation), summed in streaming form.
 
     **Arguments:**
 
-    - ``tracker``: a :class:`Tracker` (its model may differ from the scenario's: a mismatched
-      study); ``scenario``: a :class:`Scenario`. Both models must declare their state layout
+    - ``tracker``: a :class:`Tracker`, :class:`GMPHD`, :class:`GMCPHD`, :class:`PMBM` or
+      :class:`PMB` (its model may differ from the scenario's: a mismatched study);
+      ``scenario``: a :class:`Scenario`. Both models must declare their state layout
       (the position components are scored).
     - ``key``: PRNG key or int seed; ``num_runs``: ``R ≥ 2``.
     - ``cutoff``: GOSPA's ``c`` (position units, > 0); ``order``: ``p ≥ 1`` (default 2).
@@ -214,12 +240,20 @@ def tracker_monte_carlo(
 
     **Returns:** a :class:`TrackerMonteCarloResult`.
 
-    **Warns:** :class:`CapacityWarning` when scans overflowed ``max_measurements`` or track births
-    were refused for want of slots (the counts are in the result).
+    **Warns:** :class:`CapacityWarning` when scans overflowed ``max_measurements`` or a capacity
+    of the method was too small (the counts are in the result: ``births_dropped`` counts track
+    births refused, Gaussian components left over by a PHD/CPHD reduction, and for a PMBM/PMB
+    also gated measurements or tracks its assignment had no room for and scans its associator
+    could not answer).
     """
     _check_scenario(scenario)
-    if not isinstance(tracker, Tracker):
-        raise InputError(f"`tracker` must be a Tracker; got {type(tracker).__name__}.")
+    from ._cphd import GMCPHD
+    from ._phd import GMPHD
+    from ._pmb import PMB
+    from ._pmbm import PMBM
+
+    if not isinstance(tracker, (Tracker, GMPHD, GMCPHD, PMBM, PMB)):
+        raise InputError(f"`tracker` must be a Tracker, GMPHD, GMCPHD, PMBM or PMB; got {type(tracker).__name__}.")
     if not isinstance(num_runs, int) or num_runs < 2:
         raise InputError(f"`num_runs` must be an int >= 2 (for the interval); got {num_runs!r}.")
     if not float(cutoff) > 0:
@@ -256,11 +290,11 @@ def tracker_monte_carlo(
             CapacityWarning, stacklevel=2,
         )
     if dropped:
-        warnings.warn(
-            f"{dropped} track births over {R} runs were refused: the table's capacity "
-            f"({tracker.capacity} slots) was too small; raise `capacity`.",
-            CapacityWarning, stacklevel=2,
-        )
+        what = (f"track births over {R} runs were refused: the table's capacity ({tracker.capacity} slots) was too "
+                "small; raise `capacity`" if isinstance(tracker, Tracker) else
+                f"capacity events over {R} runs (components, tracks or assignment rows with no room, or scans the "
+                f"associator could not answer): a capacity of the {type(tracker).__name__} was too small; raise it")
+        warnings.warn(f"{dropped} {what}.", CapacityWarning, stacklevel=2)
     return TrackerMonteCarloResult(
         gospa=mean,
         gospa_interval=np.stack([mean - half, mean + half], axis=-1),

@@ -41,7 +41,7 @@ from jaxtyping import Array, Float
 from .._validation import InputError, is_concrete
 from ..association._jpda import JPDA
 from ..association._types import AbstractAssociator
-from ._pmbm import (
+from ._multibernoulli import (
     PMBMState,
     PMBMStepInfo,
     _detected_moments,
@@ -184,7 +184,8 @@ class PMB(eqx.Module):
             new_r=new_r, new_mean=new_mean, new_cov=new_cov, new_in=valid[None, :], k=k, H=1,
         )
         info = PMBMStepInfo(state.num_hypotheses, jnp.sum(state.track_active).astype(jnp.int32), n_drop,
-                            log_likelihood, jnp.asarray(assoc.ok, bool))
+                            log_likelihood, jnp.asarray(assoc.ok, bool), jnp.zeros((), jnp.int32),
+                            jnp.zeros((), jnp.int32))
         return state, info
 
     def step(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
