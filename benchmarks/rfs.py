@@ -49,9 +49,16 @@ jaxtrack pays for padding that Stone Soup does not: each scan updates ``capacity
 slots on ``max_measurements`` measurement slots, ``(1 + M)·(J + 1)`` updated slots (the counts of
 live components and measurements are printed next to the padded sizes).
 
+Where jaxtrack's GM-PHD scan goes (one run, ``J = 128``, ``M = 27``: 3612 updated slots, ~70
+kept after pruning): ~0.3 ms predict, update and the sort of the slots; the rest is Stone Soup's
+sequential merging, a ``while_loop`` over the merges actually made (before it, fixed loops over
+every slot and candidate took 175 ms a scan). A vmapped batch costs about as much per run as
+one run: ``vmap`` steps the runs' loops side by side until the longest is done. The ``"vo-ma"``
+reduction (the GM-CPHD's) still runs ``J`` fixed vectorised passes over all the updated slots.
+
 Needs Stone Soup (the ``bench`` extra). Usage::
 
-    python benchmarks/rfs.py                 # 50 scans, batch of 64 runs (GM-CPHD 16), ~5 min on 2 cores
+    python benchmarks/rfs.py                 # 50 scans, batch of 64 runs (GM-CPHD 16), ~9 min on 2 cores
     python benchmarks/rfs.py --quick         # a smoke test (10 scans, 4 runs, GM-CPHD one run)
     python benchmarks/rfs.py --json out.json
 """
