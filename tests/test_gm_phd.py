@@ -2,7 +2,9 @@
 oracle, the closed-form one-step update, the overflow flag, a gradient and the input checks.
 
 Two shapes only (the Stone Soup scenario; one small case shared by the other tests), so the
-file compiles ``run_phd`` three times (two forward programs and one gradient)."""
+file compiles ``run_phd`` five times (three forward programs: the Stone Soup scenario, the small
+case with each reduction; one gradient per reduction), and Stone Soup's merging twice more on its
+own (its fast and its loop form)."""
 
 from datetime import datetime, timedelta
 
@@ -282,14 +284,17 @@ def test_budget_overflow_is_flagged():
     assert bool(run_phd(_small(prune_threshold=1e-300, merge_threshold=1e-12), z, valid, warn=False).overflow)
 
 
-def test_gradient_matches_central_differences():
+@pytest.mark.parametrize("reduction", ["vo-ma", "stonesoup"])
+def test_gradient_matches_central_differences(reduction):
     """d(final expected cardinality)/d(P_D, κ, birth weight) through predict, update and the
-    merging passes, on scans where no prune or merge decision flips within ±h."""
+    merging passes, on scans where no prune or merge decision flips within ±h. With Stone Soup's
+    reduction the forward pass is the fast ``while_loop`` merge and the derivatives those of its
+    loop form (a ``custom_jvp``), so reverse mode works there too."""
     z, valid = _scans(TWO_TARGETS)
 
     def run(pd, kappa, bw):
         phd = _small(prob_detect=pd, clutter_density=kappa, birth_weights=jnp.reshape(bw, (1,)),
-                     merge_threshold=4.0, prune_threshold=1e-4)
+                     merge_threshold=4.0, prune_threshold=1e-4, reduction=reduction)
         return run_phd(phd, z, valid, warn=False)
 
     x0 = (0.8, 1e-3, 0.3)
@@ -301,6 +306,44 @@ def test_gradient_matches_central_differences():
         assert np.array_equal(np.asarray(plus.active), np.asarray(minus.active))
         fd = (float(plus.cardinality[-1]) - float(minus.cardinality[-1])) / (2 * h)
         assert abs(float(g) - fd) <= 1e-6 * abs(fd), (i, float(g), fd)
+
+
+def _merge_inputs(seed, K=300, n=2):
+    """``K`` candidates (more than two of the fast merge's chunks), in clusters so that merges
+    happen (and merged weights reach the cap of 1), some weights tied, some not kept."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-20.0, 20.0, (40, n))
+    means = centres[rng.integers(0, 40, K)] + rng.normal(0.0, 0.7, (K, n))
+    A = rng.normal(0.0, 0.6, (K, n, n))
+    covs = A @ np.swapaxes(A, 1, 2) + 0.3 * np.eye(n)
+    weights = rng.uniform(1e-3, 0.9, K)
+    weights[10:20] = weights[5]  # ties: Stone Soup pops the later one
+    keep = rng.random(K) < 0.9
+    return weights, means, covs, keep
+
+
+@pytest.mark.parametrize("capacity", [300, 40])
+def test_fast_stonesoup_merge_equals_its_loop_form(capacity):
+    """Stone Soup's merging: the fast ``while_loop`` form (what ``reduction="stonesoup"`` runs)
+    against the fixed-loop form (its derivative rule) on 300 candidates in clusters, with room for
+    every slot and with components left over (counted), one input and a vmapped batch of three."""
+    from jaxtrack.multitarget._phd import _merge_loops, _merge_stonesoup
+
+    U, free = jnp.asarray(4.0), (jnp.zeros(2), jnp.eye(2))
+    fast = jax.jit(jax.vmap(lambda *a: _merge_stonesoup(capacity, U, *free, *a)))
+    loops = jax.jit(lambda *a: _merge_loops(capacity, True, U, *free, *a))
+    batch = [_merge_inputs(seed) for seed in range(3)]
+    got = fast(*(jnp.asarray(np.stack(x)) for x in zip(*batch)))
+    for i, inputs in enumerate(batch):
+        want = loops(*map(jnp.asarray, inputs))
+        w, m, P, a, n_drop, w_drop = (np.asarray(x[i]) for x in got)
+        assert np.array_equal(a, np.asarray(want[3])) and int(n_drop) == int(want[4])
+        assert a.sum() < capacity if capacity == 300 else (a.all() and n_drop > 0)
+        assert np.max(w) == 1.0  # the cap was reached
+        np.testing.assert_allclose(w, want[0], rtol=1e-13, atol=0.0)
+        np.testing.assert_allclose(m, want[1], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(P, want[2], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(w_drop, want[5], rtol=1e-13)
 
 
 @pytest.mark.parametrize(
