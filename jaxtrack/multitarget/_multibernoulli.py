@@ -374,6 +374,59 @@ def _finish(f, state, *, existence, means, covs, local_active, table, log_w, hyp
 
 
 
+
+class AbstractMultiBernoulliFilter(eqx.Module):
+    """What the PMBM (:class:`~jaxtrack.multitarget.PMBM`) and the PMB
+    (:class:`~jaxtrack.multitarget.PMB`) share: the configuration fields (documented on each) and
+    every step but the update, which each implements (ranked hypotheses, or association marginals)."""
+
+    filter: object
+    model: object
+    prob_survival: Float[Array, ""]
+    prob_detect: Float[Array, ""]
+    clutter_density: Float[Array, ""]
+    birth_weights: Float[Array, " B"]
+    birth_means: Float[Array, "B n"]
+    birth_covs: Float[Array, "B n n"]
+    initial_weights: Float[Array, " B0"]
+    initial_means: Float[Array, "B0 n"]
+    initial_covs: Float[Array, "B0 n n"]
+    poisson_prune_threshold: Float[Array, ""]
+    poisson_merge_threshold: Float[Array, ""]
+    existence_threshold: Float[Array, ""]
+    estimation_threshold: Float[Array, ""]
+    gate: Float[Array, ""]
+    poisson_capacity: int = eqx.field(static=True)
+    max_tracks: int = eqx.field(static=True)
+    max_hypotheses: int = eqx.field(static=True)
+
+    def init(self) -> PMBMState:
+        """The prior: the initial Poisson intensity, no tracks, one global hypothesis."""
+        return _init_state(self, self.max_hypotheses)
+
+    def predict(self, state: PMBMState) -> PMBMState:
+        """Prediction (G18 Sec. IV-A): ``r ← P_S r``, the filter's predicted moments, the Poisson
+        survival and births, the Poisson reduction."""
+        return _predict(self, state)
+
+    def update(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
+        raise NotImplementedError
+
+    def step(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
+        """One scan: :meth:`predict` (not on scan 0, which updates the prior), :meth:`update`.
+
+        **Arguments:** ``state`` after scan ``k − 1`` (or :meth:`init`); ``measurements``
+        ``(M, m)`` in the sensor's units (padding may hold anything); ``valid`` ``(M,)`` bool.
+        """
+        state, info = self.update(_maybe_predict(self, state), measurements, valid)
+        return eqx.tree_at(lambda s: s.step, state, state.step + 1), info
+
+    def estimates(self, state: PMBMState):
+        """The tracks of the most likely global hypothesis with ``r >`` ``estimation_threshold``
+        (G18 Sec. VI, estimator 1; for the PMB, its one hypothesis). **Returns:** ``(states (N, n),
+        mask (N,), track_id (N,))`` by track slot."""
+        return _estimates(self, state)
+
 class PMBMResult(eqx.Module):
     """A PMBM or PMB run over ``T`` scans.
 
@@ -425,10 +478,7 @@ def run_pmbm(mb, measurements: ArrayLike, valid: ArrayLike, *, warn: bool = True
 
     **Returns:** a :class:`PMBMResult`. **Raises:** :class:`~jaxtrack.InputError` naming the argument.
     """
-    from ._pmb import PMB
-    from ._pmbm import PMBM
-
-    if not isinstance(mb, (PMBM, PMB)):
+    if not isinstance(mb, AbstractMultiBernoulliFilter):
         raise InputError(f"`mb` must be a PMBM or PMB filter; got {type(mb).__name__}.")
     measurements, valid = _check_scans(measurements, valid, mb.model.meas_dim)
     result = _run(mb, measurements, valid)

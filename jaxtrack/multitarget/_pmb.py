@@ -36,27 +36,23 @@ import math
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float
 
 from .._validation import InputError, is_concrete
 from ..association._jpda import JPDA
 from ..association._types import AbstractAssociator
 from ._multibernoulli import (
+    AbstractMultiBernoulliFilter,
     PMBMState,
     PMBMStepInfo,
     _detected_moments,
-    _estimates,
     _finish,
-    _init_state,
-    _maybe_predict,
     _mb_fields,
     _new_tracks,
-    _predict,
     _track_weights,
 )
 
 
-class PMB(eqx.Module):
+class PMB(AbstractMultiBernoulliFilter):
     r"""The track-oriented PMB filter (Williams 2015, TOMB/P) with fixed budgets.
 
     **Arguments:** as :class:`~jaxtrack.multitarget.PMBM` (without ``max_hypotheses`` and
@@ -82,26 +78,7 @@ class PMB(eqx.Module):
         ```
     """
 
-    filter: object
-    model: object
-    prob_survival: Float[Array, ""]
-    prob_detect: Float[Array, ""]
-    clutter_density: Float[Array, ""]
-    birth_weights: Float[Array, " B"]
-    birth_means: Float[Array, "B n"]
-    birth_covs: Float[Array, "B n n"]
-    initial_weights: Float[Array, " B0"]
-    initial_means: Float[Array, "B0 n"]
-    initial_covs: Float[Array, "B0 n n"]
-    poisson_prune_threshold: Float[Array, ""]
-    poisson_merge_threshold: Float[Array, ""]
-    existence_threshold: Float[Array, ""]
-    estimation_threshold: Float[Array, ""]
-    gate: Float[Array, ""]
     associator: AbstractAssociator
-    poisson_capacity: int = eqx.field(static=True)
-    max_tracks: int = eqx.field(static=True)
-    max_hypotheses: int = eqx.field(static=True)
 
     def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density, birth_weights, birth_means,
                  birth_covs, max_tracks: int, poisson_capacity: int = 16, initial_weights=None, initial_means=None,
@@ -126,14 +103,6 @@ class PMB(eqx.Module):
                              f"{type(associator).__name__}.")
         self.associator = associator
         self.max_hypotheses = 1
-
-    def init(self) -> PMBMState:
-        """The prior: the initial Poisson intensity, no tracks."""
-        return _init_state(self, 1)
-
-    def predict(self, state: PMBMState) -> PMBMState:
-        """Prediction, as :meth:`PMBM.predict <jaxtrack.multitarget.PMBM.predict>`."""
-        return _predict(self, state)
 
     def update(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
         """The PMBM update projected to one multi-Bernoulli through the association marginals
@@ -187,14 +156,3 @@ class PMB(eqx.Module):
                             log_likelihood, jnp.asarray(assoc.ok, bool), jnp.zeros((), jnp.int32),
                             jnp.zeros((), jnp.int32))
         return state, info
-
-    def step(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
-        """One scan: :meth:`predict` (not on scan 0), :meth:`update`."""
-        state, info = self.update(_maybe_predict(self, state), measurements, valid)
-        return eqx.tree_at(lambda s: s.step, state, state.step + 1), info
-
-    def estimates(self, state: PMBMState):
-        """The tracks with ``r >`` ``estimation_threshold``. **Returns:** ``(states (N, n), mask
-        (N,), track_id (N,))``."""
-        return _estimates(self, state)
-

@@ -62,16 +62,13 @@ from jaxtyping import Array, Float
 from .._validation import InputError, is_concrete
 from ..association._murty import k_best_assignments
 from ._multibernoulli import (
+    AbstractMultiBernoulliFilter,
     PMBMState,
     PMBMStepInfo,
     _detected_moments,
-    _estimates,
     _finish,
-    _init_state,
-    _maybe_predict,
     _mb_fields,
     _new_tracks,
-    _predict,
     _track_weights,
 )
 from ._phd import _scalar
@@ -96,7 +93,7 @@ def _compact_children(child, H):
     return uniq, jnp.where(child >= 0, slot.T, -1).astype(jnp.int32)
 
 
-class PMBM(eqx.Module):
+class PMBM(AbstractMultiBernoulliFilter):
     r"""The track-oriented Poisson multi-Bernoulli mixture filter (García-Fernández et al. 2018)
     with fixed budgets: ``max_tracks`` tracks, ``max_hypotheses`` global hypotheses (the best
     ones, by Murty's ranked assignment over all prior hypotheses at once), ``poisson_capacity``
@@ -151,26 +148,7 @@ class PMBM(eqx.Module):
         ```
     """
 
-    filter: object
-    model: object
-    prob_survival: Float[Array, ""]
-    prob_detect: Float[Array, ""]
-    clutter_density: Float[Array, ""]
-    birth_weights: Float[Array, " B"]
-    birth_means: Float[Array, "B n"]
-    birth_covs: Float[Array, "B n n"]
-    initial_weights: Float[Array, " B0"]
-    initial_means: Float[Array, "B0 n"]
-    initial_covs: Float[Array, "B0 n n"]
-    poisson_prune_threshold: Float[Array, ""]
-    poisson_merge_threshold: Float[Array, ""]
     hypothesis_threshold: Float[Array, ""]
-    existence_threshold: Float[Array, ""]
-    estimation_threshold: Float[Array, ""]
-    gate: Float[Array, ""]
-    poisson_capacity: int = eqx.field(static=True)
-    max_tracks: int = eqx.field(static=True)
-    max_hypotheses: int = eqx.field(static=True)
     assignment_rows: int = eqx.field(static=True)
     assignment_tracks: int = eqx.field(static=True)
 
@@ -196,15 +174,6 @@ class PMBM(eqx.Module):
         self.assignment_rows = _positive_int("assignment_rows", assignment_rows)
         self.assignment_tracks = _positive_int("assignment_tracks", assignment_tracks)
         self.hypothesis_threshold = _scalar("hypothesis_threshold", hypothesis_threshold, low=0.0, high=1.0)
-
-    def init(self) -> PMBMState:
-        """The prior: the initial Poisson intensity, no tracks, one global hypothesis."""
-        return _init_state(self, self.max_hypotheses)
-
-    def predict(self, state: PMBMState) -> PMBMState:
-        """Prediction (G18 Sec. IV-A): ``r ← P_S r``, the filter's predicted moments, the Poisson
-        survival and births, the Poisson reduction."""
-        return _predict(self, state)
 
     def update(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
         r"""Update (G18 Theorem 2) on one padded scan, with the ``H`` best posterior global
@@ -308,19 +277,3 @@ class PMBM(eqx.Module):
         info = PMBMStepInfo(state.num_hypotheses, jnp.sum(state.track_active).astype(jnp.int32), n_drop,
                             log_likelihood, jnp.ones((), bool), n_rows, n_tracks)
         return state, info
-
-    def step(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
-        """One scan: :meth:`predict` (not on scan 0, which updates the prior), :meth:`update`.
-
-        **Arguments:** ``state`` after scan ``k − 1`` (or :meth:`init`); ``measurements``
-        ``(M, m)`` in the sensor's units (padding may hold anything); ``valid`` ``(M,)`` bool.
-        """
-        state, info = self.update(_maybe_predict(self, state), measurements, valid)
-        return eqx.tree_at(lambda s: s.step, state, state.step + 1), info
-
-    def estimates(self, state: PMBMState):
-        """The tracks of the most likely global hypothesis with ``r >`` ``estimation_threshold``
-        (G18 Sec. VI, estimator 1). **Returns:** ``(states (N, n), mask (N,), track_id (N,))``."""
-        return _estimates(self, state)
-
-
