@@ -1,8 +1,8 @@
-"""PMBM and PMB per-scan time on the Williams (2015) scenario, against the budgets that set it.
+"""Per-scan time of the Williams (2015) study's filters (GM-PHD, GM-CPHD, PMB, PMBM at several budgets).
 
 The job: one run of :func:`jaxtrack.multitarget.williams15` (81 scans, up to 40 measurements per
-padded scan), filtered by the study's PMB and by its PMBM at several global-hypothesis budgets
-``H`` (``--hypotheses``, default 16, 64 and 200: the study's value, and the MATLAB reference's
+padded scan), filtered by the study's GM-PHD, GM-CPHD and PMB and by its PMBM at several
+global-hypothesis budgets ``H`` (``--hypotheses``, default 16, 64 and 200: the study's value, and the MATLAB reference's
 ``Nhyp_max = 200``), each jitted once (compilation reported separately), timed as the best of
 ``--repeats`` runs; and a vmapped batch of ``--runs`` runs (the Monte Carlo's shape) for the
 study's budget. Printed: milliseconds per scan, the largest number of global hypotheses held and
@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 from jaxtrack.applications.williams15.scenario import (  # noqa: E402
     ASSIGNMENT_ROWS, ASSIGNMENT_TRACKS, PMBM_HYPOTHESES, methods, scenario,
 )
-from jaxtrack.multitarget import PMBM, simulate_scenario, simulate_scenarios  # noqa: E402
+from jaxtrack.multitarget import PMBM, run_cphd, run_phd, simulate_scenario, simulate_scenarios  # noqa: E402
 from jaxtrack.multitarget._multibernoulli import _run  # noqa: E402
 
 
@@ -68,6 +68,12 @@ def main(argv=None):
     print(f"jaxtrack PMBM/PMB on the Williams (2015) scenario: {T} scans, {z.shape[1]} measurement slots, "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}")
     print(f"{'filter':<22}{'compile [s]':>12}{'ms/scan':>10}{'max hyps':>10}{'max rows':>10}{'max tracks':>12}")
+    # The study's intensity filters first (their reduction, Table II, is a while loop over the
+    # merges made: jaxtrack/multitarget/_reduction.py).
+    for name, runner, f in (("GM-PHD", run_phd, base["phd"]), ("GM-CPHD", run_cphd, base["cphd"])):
+        comp, best, _ = _time(eqx.filter_jit(lambda f, z, v, runner=runner: runner(f, z, v, warn=False)), f, z, v,
+                              repeats=a.repeats)
+        print(f"{name:<22}{comp:>12.1f}{best / T * 1e3:>10.2f}{'-':>10}{'-':>10}{'-':>12}")
     run = eqx.filter_jit(_run)
     contenders = [("PMB (exact JPDA)", base["pmb"])]
     for H in a.hypotheses:

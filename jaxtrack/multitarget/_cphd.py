@@ -54,11 +54,11 @@ from ._phd import (
     _empty_mixture,
     _pair_likelihoods,
     _predict_intensity,
-    _reduce_mixture,
     _scalar,
     _updated_layout,
     _warn_capacity,
 )
+from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
 
 

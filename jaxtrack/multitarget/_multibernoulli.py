@@ -21,7 +21,8 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
-from ._phd import _check_scans, _common_fields, _pair_likelihoods, _reduce_mixture, _scalar
+from ._phd import _check_scans, _common_fields, _pair_likelihoods, _scalar
+from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
 
 class PMBMState(eqx.Module):

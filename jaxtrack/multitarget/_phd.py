@@ -13,9 +13,9 @@ filter", IEEE Trans. Signal Process. 54(11), 4091-4104:
    ``w_ij = P_D w_i q_ij / (κ + P_D Σ_l w_l q_lj)`` with ``q_ij = N(z_j; ẑ_i, S_i)`` and the
    filter's conditioned moments: ``(1 + M_max)·J`` slots, ``J`` = capacity + births;
 3. **reduce** (Table II, "pruning", with thresholds ``T``, ``U`` and ``J_max``): prune below
-   ``T``, then a ``fori_loop`` over the ``J_max`` output slots, each taking the heaviest
+   ``T``, then one pass per output slot (at most ``J_max``), each taking the heaviest
    remaining component and merging every remaining one within squared Mahalanobis distance ``U``
-   (measured with the candidate's covariance). What is left when the slots are used up is
+   (measured with the candidate's covariance; :mod:`._reduction`). What is left when the slots are used up is
    counted (number and weight): an overflow is flagged, never silent, and :func:`run_phd` warns
    on the host (:class:`CapacityWarning`, as :func:`run_tracker` does).
 
@@ -38,16 +38,12 @@ differ from Tables I-II in five places:
 Not reproduced: Stone Soup's truncation to ``max_number_components`` (which redistributes the
 truncated weight); here the budget is ``capacity`` and what exceeds it is counted instead.
 
-Stone Soup's pairwise merging is sequential. As fixed loops (each of the ``J_max`` slots
-visiting all ``(1 + M)·J`` candidates) a scan took 175 ms at ``J_max = 128``, ``M = 27`` (the
-scenario of ``benchmarks/rfs.py``), so the forward pass is one ``while_loop`` over the merges
-actually made (:func:`_merge_stonesoup`; the same values, 0.9 ms a scan there) and the fixed
-loops are only its derivative rule, which reverse mode needs.
+Both reductions run as a ``while_loop`` over the merges actually made, with the fixed-loop
+form as their derivative rule (:mod:`._reduction`: the measured costs are there).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 import warnings
 from typing import NamedTuple
@@ -61,8 +57,8 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
 from ..filters._base import AbstractFilter
-from ..filters._linalg import cholesky_and_inverse
 from ..models._base import AbstractStateSpaceModel
+from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
 
 _REDUCTIONS = ("vo-ma", "stonesoup")
@@ -257,170 +253,6 @@ def _warn_capacity(what, capacity, result):
         )
 
 
-def _reduce_mixture(f, weights, means, covs, active):
-    """:meth:`GMPHD.reduce` for any module ``f`` with its fields (``prune_threshold``,
-    ``merge_threshold``, ``reduction``, ``capacity``, the birth mixture)."""
-    dtype = weights.dtype
-    T, U = f.prune_threshold.astype(dtype), f.merge_threshold.astype(dtype)
-    ss = f.reduction == "stonesoup"
-    keep = active & ((weights >= T) if ss else (weights > T))
-    num_pruned = jnp.sum(active & ~keep).astype(jnp.int32)
-    if ss:
-        # Stone Soup spreads the pruned weight evenly over the kept components.
-        pruned = jnp.sum(jnp.where(active & ~keep, weights, 0.0))
-        n_keep = jnp.sum(keep)
-        weights = weights + jnp.where(keep, pruned / jnp.maximum(n_keep, 1), 0.0)
-    free = (f.birth_means[0].astype(dtype), f.birth_covs[0].astype(dtype))  # what a free slot holds
-    if ss:
-        out = _merge_stonesoup(f.capacity, U, *free, weights, means, covs, keep)
-    else:
-        out = _merge_loops(f.capacity, False, U, *free, weights, means, covs, keep)
-    return *out, num_pruned
-
-
-def _merge_loops(J, ss, U, free_mean, free_cov, weights, means, covs, keep):
-    """The merging into ``J`` slots as fixed loops (differentiable in both modes): a ``fori_loop``
-    over the slots, each a vectorised Table II pass (``ss`` False) or, for Stone Soup's pairwise
-    merging, a ``fori_loop`` over all ``K`` candidates. **Returns:** ``(weights, means, covs,
-    active, num_dropped, dropped_weight)``."""
-    dtype = weights.dtype
-    # Each candidate's inverse covariance, once: the distance uses the candidate's P_i.
-    _, chol_inv = jax.vmap(cholesky_and_inverse)(covs)
-    prec = jnp.einsum("kji,kjl->kil", chol_inv, chol_inv)
-    K, n = means.shape
-    masked = jnp.where(keep, weights, -jnp.inf)
-    # Stone Soup pops the last of a stable ascending sort: among equal weights the later one.
-    order = jnp.argsort(masked, stable=True)  # ascending
-    out = (jnp.zeros((J,), dtype), jnp.zeros((J, n), dtype), jnp.zeros((J, n, n), dtype), jnp.zeros((J,), bool))
-
-    def pass_vo_ma(remaining):
-        j = jnp.argmax(jnp.where(remaining, weights, -jnp.inf))
-        d = means - means[j][None, :]
-        dist = jnp.einsum("ki,kil,kl->k", d, prec, d)
-        L = remaining & (dist <= U)
-        wl = jnp.where(L, weights, 0.0)
-        wsum = jnp.sum(wl)
-        safe = jnp.where(wsum > 0.0, wsum, 1.0)
-        mean = jnp.sum(wl[:, None] * means, axis=0) / safe
-        dm = mean[None, :] - means
-        cov = jnp.sum(wl[:, None, None] * (covs + dm[:, :, None] * dm[:, None, :]), axis=0) / safe
-        return wsum, mean, cov, remaining & ~L
-
-    def pass_stonesoup(remaining):
-        last = jnp.max(jnp.where(remaining[order], jnp.arange(K), -1))
-        j = order[jnp.maximum(last, 0)]
-        remaining = remaining.at[j].set(False)
-
-        def inner(p, carry):
-            w_b, m_b, P_b, rem = carry
-            c = order[p]
-            d = m_b - means[c]
-            hit = rem[c] & (d @ prec[c] @ d < U)
-            w_new, m_new, P_new = _merge_pair(w_b, m_b, P_b, weights[c], means[c], covs[c], d)
-            return (jnp.where(hit, w_new, w_b), jnp.where(hit, m_new, m_b),
-                    jnp.where(hit, P_new, P_b), rem.at[c].set(rem[c] & ~hit))
-
-        return jax.lax.fori_loop(0, K, inner, (weights[j], means[j], covs[j], remaining))
-
-    def body(slot, carry):
-        remaining, (w_o, m_o, P_o, a_o) = carry
-        has = jnp.any(remaining)
-        if ss:
-            def skip(rem):
-                return jnp.zeros((), dtype), means[0], covs[0], rem
-            wsum, mean, cov, remaining = jax.lax.cond(has, pass_stonesoup, skip, remaining)
-        else:
-            wsum, mean, cov, remaining = pass_vo_ma(remaining)
-        w_o = w_o.at[slot].set(jnp.where(has, wsum, 0.0))
-        m_o = m_o.at[slot].set(jnp.where(has, mean, free_mean))
-        P_o = P_o.at[slot].set(jnp.where(has, cov, free_cov))
-        return remaining, (w_o, m_o, P_o, a_o.at[slot].set(has))
-
-    remaining, (w_o, m_o, P_o, a_o) = jax.lax.fori_loop(0, J, body, (keep, out))
-    num_dropped = jnp.sum(remaining).astype(jnp.int32)
-    dropped_weight = jnp.sum(jnp.where(remaining, weights, 0.0))
-    return w_o, m_o, P_o, a_o, num_dropped, dropped_weight
-
-
-def _merge_pair(w_b, m_b, P_b, w_c, m_c, P_c, d):
-    """Stone Soup's merge of candidate ``c`` into the running component ``b`` (``d = m_b − m_c``),
-    the merged weight capped at 1."""
-    ws = w_b + w_c
-    ws_safe = jnp.where(ws > 0.0, ws, 1.0)  # a pruned (T = 0) pair: keep it finite
-    a, b = w_b / ws_safe, w_c / ws_safe
-    return jnp.minimum(ws, 1.0), m_b * a + m_c * b, P_b * a + P_c * b + jnp.outer(d, d) * a * b
-
-
-_CHUNK = 128  # candidates per vectorised distance evaluation in the fast Stone Soup merge
-
-
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
-def _merge_stonesoup(J, U, free_mean, free_cov, weights, means, covs, keep):
-    """Stone Soup's pairwise merging, the same values as :func:`_merge_loops` (``ss`` True) at the
-    cost of the work actually done. One ``while_loop`` whose every step either merges a candidate
-    into the running component or, when none is left to merge, stores it and seeds the next slot
-    with the heaviest remaining one; the running component changes only at a merge, so the next
-    candidate merged is the first remaining one (in visiting order) within ``U`` of it, found with
-    the distances of ``_CHUNK`` candidates at a time among the kept ones (the pruned ones sort
-    first, and their precisions are never computed). Derivatives (its JVP, and so ``jax.grad``)
-    are those of :func:`_merge_loops`, whose fixed loops reverse-mode differentiation needs."""
-    dtype = weights.dtype
-    K, n = means.shape
-    ch = min(K, _CHUNK)
-    order = jnp.argsort(jnp.where(keep, weights, -jnp.inf), stable=True)  # visiting order, ascending
-    w_o, m_o, P_o = weights[order], means[order], covs[order]
-    first_kept = (K - jnp.sum(keep)).astype(jnp.int32)
-
-    def precisions(c):
-        q, prec = c
-        q = jnp.minimum(q, K - ch)
-        _, chol_inv = jax.vmap(cholesky_and_inverse)(jax.lax.dynamic_slice_in_dim(P_o, q, ch))
-        return q + ch, jax.lax.dynamic_update_slice_in_dim(prec, jnp.einsum("kji,kjl->kil", chol_inv, chol_inv), q, 0)
-
-    _, prec_o = jax.lax.while_loop(lambda c: c[0] < K, precisions, (first_kept, jnp.zeros((K, n, n), dtype)))
-
-    def step(c):
-        s, p, is_open, (w_b, m_b, P_b), rem, n_rem, (w, m, P, a) = c
-        # Search one chunk from p for the next candidate within U of the open slot's component.
-        q = jnp.minimum(p, K - ch)
-        d = m_b[None, :] - jax.lax.dynamic_slice_in_dim(m_o, q, ch)
-        dist = jnp.einsum("ki,kil,kl->k", d, jax.lax.dynamic_slice_in_dim(prec_o, q, ch), d)
-        hit = jax.lax.dynamic_slice_in_dim(rem, q, ch) & (dist < U) & (q + jnp.arange(ch) >= p)
-        found = is_open & jnp.any(hit)
-        h = q + jnp.argmax(hit).astype(jnp.int32)
-        advance = is_open & ~found & (q + ch < K)
-        done = is_open & ~found & ~advance  # nothing left to merge: store the slot
-        w, m, P, a = (w.at[s].set(jnp.where(done, w_b, w[s])), m.at[s].set(jnp.where(done, m_b, m[s])),
-                      P.at[s].set(jnp.where(done, P_b, P[s])), a.at[s].set(done | a[s]))
-        s = s + done.astype(jnp.int32)
-        seeding = (done | ~is_open) & (n_rem > 0) & (s < J)
-        seed = K - 1 - jnp.argmax(rem[::-1]).astype(jnp.int32)  # the last remaining: the heaviest
-        merged = _merge_pair(w_b, m_b, P_b, w_o[h], m_o[h], P_o[h], m_b - m_o[h])
-        running = tuple(jnp.where(found, x, jnp.where(seeding, y, z)) for x, y, z in
-                        zip(merged, (w_o[seed], m_o[seed], P_o[seed]), (w_b, m_b, P_b)))
-        taken = jnp.where(found, h, seed)
-        rem = rem.at[taken].set(rem[taken] & ~(found | seeding))
-        n_rem = n_rem - (found | seeding).astype(jnp.int32)
-        p = jnp.where(found, h + 1, jnp.where(advance, q + ch, first_kept))
-        return s, p, found | advance | seeding, running, rem, n_rem, (w, m, P, a)
-
-    out = (jnp.zeros((J,), dtype), jnp.broadcast_to(free_mean, (J, n)), jnp.broadcast_to(free_cov, (J, n, n)),
-           jnp.zeros((J,), bool))
-    running = (jnp.zeros((), dtype), jnp.zeros((n,), dtype), jnp.zeros((n, n), dtype))
-    init = (jnp.zeros((), jnp.int32), first_kept, jnp.zeros((), bool), running, keep[order], K - first_kept, out)
-    _, _, _, _, rem, _, (w, m, P, a) = jax.lax.while_loop(
-        lambda c: c[2] | ((c[5] > 0) & (c[0] < J)), step, init)
-    remaining = jnp.zeros((K,), bool).at[order].set(rem)  # back to the input's order, for the sum
-    num_dropped = jnp.sum(remaining).astype(jnp.int32)
-    dropped_weight = jnp.sum(jnp.where(remaining, weights, 0.0))
-    return w, m, P, a, num_dropped, dropped_weight
-
-
-@_merge_stonesoup.defjvp
-def _merge_stonesoup_jvp(J, primals, tangents):
-    return jax.jvp(functools.partial(_merge_loops, J, True), primals, tangents)
-
-
 class GMPHD(eqx.Module):
     r"""The GM-PHD filter of Vo & Ma (2006) with a fixed component budget ``J_max``.
 
@@ -578,7 +410,7 @@ class GMPHD(eqx.Module):
     def reduce(self, weights, means, covs, active):
         r"""Pruning and merging (Vo & Ma 2006, Table II, §III-C) into ``J_max`` slots.
 
-        With ``I = {i : w_i > T}``, each of the ``J_max`` passes takes ``j = argmax_{i∈I} w_i``,
+        With ``I = {i : w_i > T}``, each pass (until ``I`` is empty, at most ``J_max``) takes ``j = argmax_{i∈I} w_i``,
         ``L = {i ∈ I : (m_i − m_j)ᵀ P_i⁻¹ (m_i − m_j) ≤ U}`` and emits
         ``w̃ = Σ_L w_i``, ``m̃ = Σ_L w_i m_i / w̃``,
         ``P̃ = Σ_L w_i (P_i + (m̃ − m_i)(m̃ − m_i)ᵀ) / w̃``, then ``I ← I \ L``. What remains in
