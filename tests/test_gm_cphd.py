@@ -169,6 +169,35 @@ def test_poisson_prediction_reduces_to_the_phd_update():
     assert np.max(np.abs(np.asarray(bern.weights[0])[act] / np.asarray(phd.weights[0])[act] - 1.0)) > 1e-5
 
 
+def test_initial_intensity_is_a_poisson_start():
+    """``initial_*``: a Poisson RFS at time 0. The CPHD's pmf is Poisson(Σ w_0) (SciPy's, cut at
+    N_max = 3 and renormalised, the tail counted as truncated), and with Poisson births its first
+    update from a tiny initial mass equals the PHD's from the same initial intensity (the
+    truncation shows as μ³: total mass 2e-4, 1e-10 relative)."""
+    from scipy.stats import poisson
+
+    m0, P0 = B_MEAN + np.array([-7.0, 0.0, 6.0, 0.0]), B_COV / 4.0
+    big = _cphd(initial_weights=[1.5, 1.0], initial_means=[m0, B_MEAN], initial_covs=[P0, B_COV]).init()
+    want = poisson.pmf(np.arange(N_MAX + 1), 2.5)
+    np.testing.assert_allclose(np.asarray(big.cardinality_pmf), want / want.sum(), rtol=1e-13)
+    np.testing.assert_allclose(float(big.truncated_mass), poisson.sf(N_MAX, 2.5), rtol=1e-12)
+    assert int(np.asarray(big.mixture.active).sum()) == 2 and float(big.mixture.cardinality) == 2.5
+
+    mu = 1e-4
+    start = dict(initial_weights=[mu], initial_means=[m0], initial_covs=[P0])
+    z, valid = _scans([SCANS[0]])
+    cphd = run_cphd(_cphd(birth_weights=[mu], birth_cardinality=None, **start), z, valid, warn=False)
+    model = LinearGaussianModel(F_CV, Q_CV, H_CV, R_CV, B_MEAN, B_COV)
+    phd = run_phd(GMPHD(KalmanFilter(), model, prob_survival=PS, prob_detect=PD, clutter_density=LAM * C,
+                        birth_weights=[mu], birth_means=[B_MEAN], birth_covs=[B_COV], capacity=CAPACITY,
+                        prune_threshold=0.0, merge_threshold=0.0, **start), z, valid)
+    act = np.asarray(phd.active[0])
+    assert act.sum() == 2 * (1 + len(SCANS[0]))  # the initial and the birth component, missed and per z
+    np.testing.assert_array_equal(np.asarray(cphd.active[0]), act)
+    np.testing.assert_allclose(np.asarray(cphd.weights[0])[act], np.asarray(phd.weights[0])[act], rtol=1e-10, atol=0)
+    np.testing.assert_allclose(np.asarray(cphd.means[0])[act], np.asarray(phd.means[0])[act], rtol=1e-12, atol=1e-12)
+
+
 def test_cardinality_truncation_is_flagged():
     """A Poisson birth cardinality (mean 0.4) with N_max = 3: the mass above 3 is reported per
     scan, at least the Poisson tail P(N_birth > 3), and warned about."""

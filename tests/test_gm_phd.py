@@ -8,6 +8,7 @@ own (its fast and its loop form)."""
 
 from datetime import datetime, timedelta
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -72,10 +73,18 @@ def _scenario(seed=3):
     return z, valid, (F, Q, H, R)
 
 
-def _stonesoup_phd(z, valid, gate=None):
+# A time-0 intensity for the first two targets (jaxtrack's `initial_*`; in Stone Soup the mixture
+# the loop starts from, one step before the first scan), in Stone Soup's state order.
+SS_INITIAL_W = np.array([0.9, 0.7])
+SS_INITIAL_M = np.array([[-61.0, 1.0, -41.0, 1.2], [51.0, -1.0, 30.0, 0.2]])
+SS_INITIAL_P = np.broadcast_to(np.diag([10.0, 1.0, 10.0, 1.0]) ** 2, (2, 4, 4))
+
+
+def _stonesoup_phd(z, valid, gate=None, initial=False):
     """Stone Soup's GM-PHD as in its tutorial: the GM hypothesiser over a distance hypothesiser
     (``include_all=True`` without a ``gate``), ``PHDUpdater``, ``GaussianMixtureReducer``; the birth
-    component (tag "birth") joins the reduced mixture at each scan's time."""
+    component (tag "birth") joins the reduced mixture at each scan's time. ``initial``: the loop
+    starts from the ``SS_INITIAL_*`` mixture, timed one step before the first scan."""
     from stonesoup.hypothesiser.distance import DistanceHypothesiser
     from stonesoup.hypothesiser.gaussianmixture import GaussianMixtureHypothesiser
     from stonesoup.measures import Mahalanobis
@@ -95,6 +104,10 @@ def _stonesoup_phd(z, valid, gate=None):
     reducer = GaussianMixtureReducer(prune_threshold=SS_PRUNE, merge_threshold=SS_MERGE)
     start = datetime(2026, 1, 1)
     reduced, history = [], []
+    if initial:
+        reduced = [TaggedWeightedGaussianState(state_vector=m.reshape(4, 1), covar=P, weight=w,
+                                               timestamp=start - timedelta(seconds=1))
+                   for w, m, P in zip(SS_INITIAL_W, SS_INITIAL_M, SS_INITIAL_P)]
     for k in range(z.shape[0]):
         t = start + timedelta(seconds=k)
         birth = TaggedWeightedGaussianState(state_vector=SS_BIRTH_M, covar=SS_BIRTH_P, weight=SS_BIRTH_W,
@@ -123,20 +136,27 @@ def _matched(a, b):
     return tuple(x[cols] for x in b)
 
 
-@pytest.mark.parametrize("gate", [None, 3.0])
-def test_equals_stonesoup_gm_phd(gate):
+@pytest.mark.parametrize("gate, initial", [(None, False), (3.0, False), (None, True)])
+def test_equals_stonesoup_gm_phd(gate, initial):
     """50 scans against Stone Soup's GM-PHD, without a gate and with its tutorial's
-    ``missed_distance=3`` (one compiled program: the gate is an array leaf)."""
+    ``missed_distance=3`` (one compiled program: the gate is an array leaf), and from a time-0
+    intensity (``initial_*``: two components, predicted into the first scan like any survivor)."""
     pytest.importorskip("stonesoup")
     z, valid, (F, Q, H, R) = _scenario()
     model = LinearGaussianModel(F, Q, H, R, SS_BIRTH_M, SS_BIRTH_P)
+    start = dict(initial_weights=SS_INITIAL_W, initial_means=SS_INITIAL_M, initial_covs=SS_INITIAL_P) if initial else {}
     phd = GMPHD(KalmanFilter(), model, prob_survival=SS_PS, prob_detect=SS_PD, clutter_density=SS_KAPPA,
                 birth_weights=[SS_BIRTH_W], birth_means=[SS_BIRTH_M], birth_covs=[SS_BIRTH_P],
                 capacity=SS_CAPACITY, prune_threshold=SS_PRUNE, merge_threshold=SS_MERGE,
-                reduction="stonesoup", gate=np.inf if gate is None else gate)
+                reduction="stonesoup", gate=np.inf if gate is None else gate, **start)
     result = run_phd(phd, z, valid)
     assert not bool(result.overflow)
-    reference = _stonesoup_phd(z, valid, gate)
+    if initial:  # the start matters: by the first scan both targets are held with weight ~1
+        assert float(result.cardinality[0]) > 1.5
+        assert float(run_phd(eqx.tree_at(lambda f: (f.initial_weights, f.initial_means, f.initial_covs), phd,
+                                         (jnp.zeros((0,)), jnp.zeros((0, 4)), jnp.zeros((0, 4, 4)))),
+                             z, valid).cardinality[0]) < 1.0
+    reference = _stonesoup_phd(z, valid, gate, initial)
     worst = {"weight": 0.0, "mean": 0.0, "cov": 0.0}
     for k, (w_ss, m_ss, P_ss) in enumerate(reference):
         act = np.asarray(result.active[k])
@@ -366,6 +386,10 @@ def test_fast_merge_equals_its_loop_form(reduction, capacity):
         ({"capacity": 0}, "capacity"),
         ({"gate": 0.0}, "gate"),
         ({"reduction": "greedy"}, "reduction"),
+        ({"initial_weights": [-0.1], "initial_means": [B_MEAN], "initial_covs": [B_COV]}, "initial_weights"),
+        ({"initial_weights": [0.5], "initial_means": [B_MEAN], "initial_covs": [-B_COV]}, "initial_covs"),
+        ({"initial_means": [B_MEAN]}, "initial_means"),
+        ({"initial_weights": [0.1] * 9, "initial_means": [B_MEAN] * 9, "initial_covs": [B_COV] * 9}, "capacity"),
     ],
 )
 def test_bad_arguments_raise_input_error(kwargs, name):

@@ -33,7 +33,9 @@ def test_methods_are_what_the_study_says():
     for name in ("pmb", "pmbm"):
         f = m[name]
         assert float(f.gate) ** 2 == pytest.approx(20.0) and float(f.existence_threshold) == 1e-5
-        assert float(f.estimation_threshold) == 0.4 and float(f.initial_weights[0]) == 3.0
+        assert float(f.estimation_threshold) == 0.4
+    for name in ("phd", "cphd", "pmb", "pmbm"):  # the same time-0 intensity for every RFS filter
+        assert float(m[name].initial_weights[0]) == 3.0 and m[name].initial_weights.shape == (1,)
     assert (scen.num_steps, scen.max_targets, float(scen.clutter_rate)) == (81, 4, 10.0)
     assert float(settings.clutter_density) == pytest.approx(10 / 300**2)
     assert (settings.gospa_cutoff, settings.gospa_order, settings.num_runs) == (10.0, 2.0, 100)

@@ -51,7 +51,8 @@ from ._phd import (
     GMPHDMixture,
     _check_scans,
     _common_fields,
-    _empty_mixture,
+    _initial_fields,
+    _initial_mixture,
     _pair_likelihoods,
     _predict_intensity,
     _scalar,
@@ -203,6 +204,9 @@ class GMCPHD(eqx.Module):
       ``Σ birth_weights`` (its mass above ``N_max`` counts as truncated at every scan).
     - ``truncation_tolerance``: the predicted mass above ``N_max`` per scan beyond which
       :func:`run_cphd` warns (default 1e-9).
+    - ``initial_weights``/``initial_means``/``initial_covs``: the intensity before the first scan,
+      as :class:`GMPHD`'s, taken as a Poisson RFS (cardinality Poisson with mean
+      ``Σ initial_weights``; see :meth:`init`); default none: no target before the first births.
 
     Reduction is the GM-PHD's ``"vo-ma"`` (Vo & Ma 2006, Table II). The estimated number of targets
     is the MAP of the cardinality pmf; the estimates are the means of that many heaviest components.
@@ -248,6 +252,9 @@ class GMCPHD(eqx.Module):
     birth_covs: Float[Array, "B n n"]
     birth_cardinality: Float[Array, " N1"]
     birth_tail: Float[Array, ""]
+    initial_weights: Float[Array, " J0"]
+    initial_means: Float[Array, "J0 n"]
+    initial_covs: Float[Array, "J0 n n"]
     prune_threshold: Float[Array, ""]
     merge_threshold: Float[Array, ""]
     truncation_tolerance: Float[Array, ""]
@@ -278,6 +285,9 @@ class GMCPHD(eqx.Module):
         truncation_tolerance: ArrayLike = 1e-9,
         gate: ArrayLike = math.inf,
         max_estimates: int | None = None,
+        initial_weights: ArrayLike | None = None,
+        initial_means: ArrayLike | None = None,
+        initial_covs: ArrayLike | None = None,
     ):
         fields = _common_fields(
             filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth_weights=birth_weights,
@@ -320,12 +330,27 @@ class GMCPHD(eqx.Module):
             self.birth_cardinality = jnp.zeros((N + 1,), pg.dtype).at[: pg.shape[0]].set(pg)
             self.birth_tail = jnp.zeros((), pg.dtype)
         self.reduction = "vo-ma"
+        for name, value in _initial_fields(initial_weights, initial_means, initial_covs, model.state_dim,
+                                           self.capacity, "capacity").items():
+            setattr(self, name, value)
 
     # ------------------------------------------------------------------------------------------
     def init(self) -> CPHDState:
-        """No targets for sure (``p_0 = δ_0``, empty mixture); births enter in the first predict."""
-        pmf = jnp.zeros((self.max_cardinality + 1,), self.birth_means.dtype).at[0].set(1.0)
-        return CPHDState(_empty_mixture(self), pmf, jnp.zeros((), pmf.dtype), jnp.ones((), bool))
+        """The state before the first scan. Without ``initial_*``: no target for sure
+        (``p_0 = δ_0``, empty mixture; births enter in the first predict). With them: a Poisson
+        RFS, the intensity ``initial_*`` and ``p_0`` Poisson with mean ``μ_0 = Σ initial_weights``
+        (the i.i.d. cluster form of a Poisson RFS; its mass above ``N_max``, ``P(N_max + 1, μ_0)``,
+        is removed, the pmf renormalised, and the mass counted in ``truncated_mass``)."""
+        N, dtype = self.max_cardinality, self.birth_means.dtype
+        mixture = _initial_mixture(self)
+        if self.initial_weights.shape[0] == 0:
+            pmf, tail = jnp.zeros((N + 1,), dtype).at[0].set(1.0), jnp.zeros((), dtype)
+        else:
+            mu, n = jnp.sum(self.initial_weights).astype(dtype), jnp.arange(N + 1)
+            pmf = jnp.exp(_log_pow(n, mu) - mu - gammaln(n + 1.0))
+            tail = gammainc(N + 1.0, mu)
+            pmf = pmf / jnp.sum(pmf)
+        return CPHDState(mixture, pmf, tail, jnp.ones((), bool))
 
     def predict(self, state: CPHDState):
         """Prediction: the intensity as :meth:`GMPHD.predict` (same tuple, ``J_max + B`` rows) and

@@ -21,7 +21,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
-from ._phd import _check_scans, _common_fields, _pair_likelihoods, _scalar
+from ._phd import _check_scans, _common_fields, _initial_fields, _pair_likelihoods, _scalar
 from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
 
@@ -131,26 +131,14 @@ def _mb_fields(filter, model, *, prob_survival, prob_detect, clutter_density, bi
         prune_threshold=poisson_prune_threshold, merge_threshold=poisson_merge_threshold, gate=gate,
         max_estimates=None,
     )
-    if initial_weights is None:
-        if initial_means is not None or initial_covs is not None:
-            raise InputError("`initial_means` and `initial_covs` need `initial_weights`.")
-        iw, im, ic = base["birth_weights"], base["birth_means"], base["birth_covs"]
-    else:
-        checked = _common_fields(
-            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth_weights=initial_weights,
-            birth_means=initial_means, birth_covs=initial_covs, capacity=poisson_capacity,
-            prune_threshold=poisson_prune_threshold, merge_threshold=poisson_merge_threshold, gate=gate,
-            max_estimates=None,
-        )
-        iw, im, ic = checked["birth_weights"], checked["birth_means"], checked["birth_covs"]
-    if iw.shape[0] > base["capacity"]:
-        raise InputError(f"`poisson_capacity` ({base['capacity']}) must hold the {iw.shape[0]} initial components.")
+    initial = _initial_fields(initial_weights, initial_means, initial_covs, model.state_dim, base["capacity"],
+                              "poisson_capacity", default=(base["birth_weights"], base["birth_means"], base["birth_covs"]))
     return {
         "filter": base["filter"], "model": base["model"], "prob_survival": base["prob_survival"],
         "prob_detect": base["prob_detect"],
         "clutter_density": _scalar("clutter_density", clutter_density, low=0.0),
         "birth_weights": base["birth_weights"], "birth_means": base["birth_means"], "birth_covs": base["birth_covs"],
-        "initial_weights": iw, "initial_means": im, "initial_covs": ic,
+        **initial,
         "poisson_capacity": base["capacity"], "max_tracks": _positive_int("max_tracks", max_tracks),
         "poisson_prune_threshold": base["prune_threshold"], "poisson_merge_threshold": base["merge_threshold"],
         "existence_threshold": _scalar("existence_threshold", existence_threshold, low=0.0, high=1.0),

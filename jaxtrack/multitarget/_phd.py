@@ -126,6 +126,44 @@ def _scalar(name, value, *, low, high=None, open_low=False):
     return x
 
 
+def _mixture_arrays(what: str, weights, means, covs, n: int) -> tuple[Array, Array, Array]:
+    """``({what}_weights (B,), {what}_means (B, n), {what}_covs (B, n, n))`` checked: shapes, finite
+    non-negative weights, symmetric positive definite covariances (errors name the argument)."""
+    w, m, c = (jnp.asarray(a, float) for a in (weights, means, covs))
+    if w.ndim != 1 or w.shape[0] < 1:
+        raise InputError(f"`{what}_weights` must have shape (B,) with B >= 1; got {w.shape}.")
+    B = w.shape[0]
+    if m.shape != (B, n):
+        raise InputError(f"`{what}_means` must have shape ({B}, {n}) (B components, the model's n states); "
+                         f"got {m.shape}.")
+    if c.shape != (B, n, n):
+        raise InputError(f"`{what}_covs` must have shape ({B}, {n}, {n}); got {c.shape}.")
+    if is_concrete(w) and not (np.all(np.asarray(w) >= 0.0) and np.all(np.isfinite(np.asarray(w)))):
+        raise InputError(f"`{what}_weights` must be finite and >= 0; got {np.asarray(w)}.")
+    if is_concrete(c):
+        cc = np.asarray(c)
+        if not np.all(np.isfinite(cc)) or not np.allclose(cc, np.swapaxes(cc, -1, -2), rtol=1e-8, atol=0.0):
+            raise InputError(f"`{what}_covs` must be finite and symmetric.")
+        if np.any(np.linalg.eigvalsh(cc) <= 0.0):
+            raise InputError(f"`{what}_covs` must be positive definite.")
+    return w, m, c
+
+
+def _initial_fields(initial_weights, initial_means, initial_covs, n: int, capacity: int, capacity_name: str,
+                    default=None) -> dict:
+    """The checked time-0 intensity (``initial_*``; when not given: ``default``, a ``(w, m, P)``
+    triple, or no component) that must fit in ``capacity`` slots."""
+    if initial_weights is None:
+        if initial_means is not None or initial_covs is not None:
+            raise InputError("`initial_means` and `initial_covs` need `initial_weights`.")
+        w, m, c = default if default is not None else (jnp.zeros((0,)), jnp.zeros((0, n)), jnp.zeros((0, n, n)))
+    else:
+        w, m, c = _mixture_arrays("initial", initial_weights, initial_means, initial_covs, n)
+    if w.shape[0] > capacity:
+        raise InputError(f"`{capacity_name}` ({capacity}) must hold the {w.shape[0]} initial components.")
+    return {"initial_weights": w, "initial_means": m, "initial_covs": c}
+
+
 def _common_fields(filter, model, *, prob_survival, prob_detect, birth_weights, birth_means, birth_covs,
                    capacity, prune_threshold, merge_threshold, gate, max_estimates) -> dict:
     """The checked fields shared by :class:`GMPHD` and :class:`~jaxtrack.multitarget.GMCPHD`
@@ -139,25 +177,7 @@ def _common_fields(filter, model, *, prob_survival, prob_detect, birth_weights, 
     filter.check_model(model)
     capacity = _positive_int("capacity", capacity)  # mixture slots
     max_estimates = capacity if max_estimates is None else _positive_int("max_estimates", max_estimates)
-    n = model.state_dim
-    bw = jnp.asarray(birth_weights, float)
-    bm = jnp.asarray(birth_means, float)
-    bc = jnp.asarray(birth_covs, float)
-    if bw.ndim != 1 or bw.shape[0] < 1:
-        raise InputError(f"`birth_weights` must have shape (B,) with B >= 1; got {bw.shape}.")
-    B = bw.shape[0]
-    if bm.shape != (B, n):
-        raise InputError(f"`birth_means` must have shape ({B}, {n}) (B births, the model's n states); got {bm.shape}.")
-    if bc.shape != (B, n, n):
-        raise InputError(f"`birth_covs` must have shape ({B}, {n}, {n}); got {bc.shape}.")
-    if is_concrete(bw) and not (np.all(np.asarray(bw) >= 0.0) and np.all(np.isfinite(np.asarray(bw)))):
-        raise InputError(f"`birth_weights` must be finite and >= 0; got {np.asarray(bw)}.")
-    if is_concrete(bc):
-        c = np.asarray(bc)
-        if not np.all(np.isfinite(c)) or not np.allclose(c, np.swapaxes(c, -1, -2), rtol=1e-8, atol=0.0):
-            raise InputError("`birth_covs` must be finite and symmetric.")
-        if np.any(np.linalg.eigvalsh(c) <= 0.0):
-            raise InputError("`birth_covs` must be positive definite.")
+    bw, bm, bc = _mixture_arrays("birth", birth_weights, birth_means, birth_covs, model.state_dim)
     # A leaf, not a static field: gated and ungated filters share one compiled program.
     gate_ = jnp.asarray(gate, float)
     if gate_.shape != () or (is_concrete(gate_) and not float(gate_) > 0.0):
@@ -185,6 +205,20 @@ def _empty_mixture(f) -> GMPHDMixture:
         num_dropped=jnp.zeros((), jnp.int32),
         dropped_weight=jnp.zeros((), dtype),
     )
+
+
+def _initial_mixture(f) -> GMPHDMixture:
+    """The time-0 intensity ``f.initial_*`` in the first slots (an empty mixture when none)."""
+    mix = _empty_mixture(f)
+    J0 = f.initial_weights.shape[0]
+    if J0 == 0:
+        return mix
+    dtype = mix.weights.dtype
+    w = f.initial_weights.astype(dtype)
+    return eqx.tree_at(
+        lambda x: (x.weights, x.means, x.covs, x.active), mix,
+        (mix.weights.at[:J0].set(w), mix.means.at[:J0].set(f.initial_means.astype(dtype)),
+         mix.covs.at[:J0].set(f.initial_covs.astype(dtype)), mix.active.at[:J0].set(w > 0.0)))
 
 
 def _predict_intensity(f, mixture: GMPHDMixture):
@@ -277,8 +311,11 @@ class GMPHD(eqx.Module):
     - ``reduction``: ``"vo-ma"`` (default, Table II) or ``"stonesoup"`` (the differences are in the
       module docstring).
     - ``max_estimates``: the static number of estimate slots (default ``capacity``).
+    - ``initial_weights`` ``(J0,)``, ``initial_means`` ``(J0, n)``, ``initial_covs`` ``(J0, n, n)``:
+      the intensity before the first scan (``J0 <= capacity``; default none: no target before the
+      first births), e.g. the Poisson prior a PMB/PMBM filter starts from (its ``initial_*``).
 
-    ``P_S``, ``P_D``, ``κ``, the birth mixture, the thresholds and the gate are array leaves
+    ``P_S``, ``P_D``, ``κ``, the birth and initial mixtures, the thresholds and the gate are array leaves
     (differentiable, and changing them does not recompile :func:`run_phd`).
 
     **Raises:** :class:`~jaxtrack.InputError` naming the argument (a probability outside
@@ -315,6 +352,9 @@ class GMPHD(eqx.Module):
     birth_weights: Float[Array, " B"]
     birth_means: Float[Array, "B n"]
     birth_covs: Float[Array, "B n n"]
+    initial_weights: Float[Array, " J0"]
+    initial_means: Float[Array, "J0 n"]
+    initial_covs: Float[Array, "J0 n n"]
     prune_threshold: Float[Array, ""]
     merge_threshold: Float[Array, ""]
     extraction_threshold: Float[Array, ""]
@@ -341,6 +381,9 @@ class GMPHD(eqx.Module):
         gate: ArrayLike = math.inf,
         reduction: str = "vo-ma",
         max_estimates: int | None = None,
+        initial_weights: ArrayLike | None = None,
+        initial_means: ArrayLike | None = None,
+        initial_covs: ArrayLike | None = None,
     ):
         if reduction not in _REDUCTIONS:
             raise InputError(f"`reduction` must be one of {_REDUCTIONS}; got {reduction!r}.")
@@ -353,11 +396,15 @@ class GMPHD(eqx.Module):
         self.extraction_threshold = _scalar("extraction_threshold", extraction_threshold, low=0.0)
         self.clutter_density = _scalar("clutter_density", clutter_density, low=0.0)
         self.reduction = reduction
+        for name, value in _initial_fields(initial_weights, initial_means, initial_covs, model.state_dim,
+                                           self.capacity, "capacity").items():
+            setattr(self, name, value)
 
     # ------------------------------------------------------------------------------------------
     def init(self) -> GMPHDMixture:
-        """The empty mixture (no targets before the first scan; births enter in :meth:`predict`)."""
-        return _empty_mixture(self)
+        """The intensity before the first scan: ``initial_*`` in the first slots, or none (births
+        enter in :meth:`predict`)."""
+        return _initial_mixture(self)
 
     def predict(self, mixture: GMPHDMixture):
         r"""Prediction (Vo & Ma 2006, Proposition 1; Table I, steps 1-2, no spawning): ``P_S w``, the

@@ -16,11 +16,13 @@ birth intensity (weight 0.005 per scan, mean (100, 100) m, standard deviations 1
 - ``"jpda"``: the JPDA :class:`~jaxtrack.multitarget.Tracker` of issue I (one-point initiation
   on the birth prior, 3-of-4 confirmation, deletion after 3 misses, a 99.9% gate).
 
-The PMB and PMBM start from the reference's time-0 Poisson intensity (``λ0`` = 3 on the birth
-Gaussian), gate at ``sqrt(20)`` (its ``gating_threshold`` = 20 on the squared distance), remove
-Bernoullis below ``r`` = 1e-5 and report the tracks of the best hypothesis above ``r`` = 0.4 (its
-estimator 1). The GM-PHD and GM-CPHD have no time-0 intensity (they start empty, as in Vo & Ma),
-prune at 1e-5 and merge within a squared Mahalanobis distance of 4 (Vo & Ma's Table II values).
+All four random-finite-set filters start from the reference's time-0 Poisson intensity (``λ0`` =
+3 on the birth Gaussian; the GM-CPHD's cardinality is then Poisson with mean 3), so that they
+are compared on the same information. The PMB and PMBM gate at ``sqrt(20)`` (its
+``gating_threshold`` = 20 on the squared distance), remove Bernoullis below ``r`` = 1e-5 and
+report the tracks of the best hypothesis above ``r`` = 0.4 (its estimator 1). The GM-PHD and
+GM-CPHD prune at 1e-5 and merge within a squared Mahalanobis distance of 4 (Vo & Ma's Table II
+values). The JPDA tracker has no prior intensity: it starts without tracks.
 """
 
 from __future__ import annotations
@@ -76,9 +78,9 @@ def methods(scen: Scenario | None = None, settings: Williams15Settings | None = 
     s = settings
     kf = KalmanFilter()
     birth = dict(birth_weights=s.birth_weights, birth_means=s.birth_means, birth_covs=s.birth_covs)
-    common = dict(prob_survival=s.prob_survival, prob_detect=s.prob_detect, **birth)
-    mb = dict(clutter_density=s.clutter_density, initial_weights=s.initial_weights, initial_means=s.initial_means,
-              initial_covs=s.initial_covs, max_tracks=MAX_TRACKS, gate=GATE)
+    initial = dict(initial_weights=s.initial_weights, initial_means=s.initial_means, initial_covs=s.initial_covs)
+    common = dict(prob_survival=s.prob_survival, prob_detect=s.prob_detect, **birth, **initial)
+    mb = dict(clutter_density=s.clutter_density, max_tracks=MAX_TRACKS, gate=GATE)
     initiator = OnePointInitiator(prior_mean=np.asarray(s.birth_means[0]), prior_cov=np.asarray(s.birth_covs[0]),
                                   filter=kf)
     return {
