@@ -84,7 +84,20 @@ def test_unwritable_out_is_found_before_the_run(tmp_path):
     assert time.perf_counter() - t0 < 60  # a 10⁷-run demo takes many minutes: it never started
 
 
-def test_ctrl_c_stops_the_demo_within_5_s_and_leaves_no_partial_file(tmp_path):
+@pytest.fixture
+def sigint_raises():
+    """SIGINT raises KeyboardInterrupt in this process for the test's duration. A test session
+    started in the background of a non-interactive shell (``cmd &`` without job control, as some CI
+    launchers and ``nohup`` scripts do) inherits SIGINT *ignored*, and an ignored signal stays
+    ignored across exec: Python then installs no KeyboardInterrupt handler, and a Ctrl-C test can
+    only fail. A handler, unlike "ignore", is reset to the default action by exec, so a child
+    started meanwhile gets Python's own Ctrl-C behaviour too."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_ctrl_c_stops_the_demo_within_5_s_and_leaves_no_partial_file(tmp_path, sigint_raises):
     out = tmp_path / "demo"
     proc = subprocess.Popen([sys.executable, "-m", "jaxtrack", "demo", "--runs", "10000000", "--out", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -150,7 +163,7 @@ def test_monte_carlo_host_loop_waits_at_least_every_second_of_work(monkeypatch):
     assert len(returns) >= 4 and max(gaps) < 1.0
 
 
-def test_monte_carlo_host_loop_sees_ctrl_c_between_blocks():
+def test_monte_carlo_host_loop_sees_ctrl_c_between_blocks(sigint_raises):
     # ~1000 blocks of ~30 ms, one progress chunk: a SIGINT after 1 s must stop the loop at once.
     monte_carlo_map(_slow_run, jax.random.key(0), 64, block_size=64)  # compile outside the clock
     timer = threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT))
