@@ -10,8 +10,8 @@ the nominal truth), and on the same truths (the study's own functions,
 - the PCRLB ``E[J]⁻¹`` (Tichavský et al. 1998; :func:`jaxtrack.bounds.pcrlb`, the study's bound);
 - the mean per-truth bound ``E[J(x)⁻¹]`` (:func:`jaxtrack.bounds.pcrlb_along` linearised along
   each truth, then averaged);
-- the study's EKF and its regularised particle filter (:func:`~jaxtrack.applications.bearings_tma.bounds.particle_filter`)
-  with each of ``--particles``.
+- the study's EKF and its regularised particle filter
+  (:func:`~jaxtrack.applications.bearings_tma.bounds.particle_filter`) with each of ``--particles``.
 
 Printed: position RMSE (m) at 240, 480, 720 and 960 s and the ratios. The particle filter
 approximates the MMSE estimator, whose mean squared error no estimator beats on these truths; as
