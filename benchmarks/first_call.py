@@ -381,8 +381,8 @@ def main() -> int:
         parser.error(f"unknown entries {unknown}; see --list")
     date = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
     versions = {p: importlib.metadata.version(p) for p in ("jax", "jaxlib")}
-    header = [f"first-call time of jaxtrack entry points, one fresh process each, persistent cache off "
-              f"(reproduce_*: cold/warm with a fresh JAXTRACK_CACHE_DIR)",
+    header = ["first-call time of jaxtrack entry points, one fresh process each, persistent cache off "
+              "(reproduce_*: cold/warm with a fresh JAXTRACK_CACHE_DIR)",
               f"jax {versions['jax']}, jaxlib {versions['jaxlib']}, {os.cpu_count()} CPUs, {date}",
               f"command: python benchmarks/first_call.py {' '.join(sys.argv[1:])}".rstrip(),
               f"load average before: {os.getloadavg()[0]:.2f}"]

@@ -211,7 +211,6 @@ def bench(num_runs, num_steps, repeats, fp_runs) -> dict:
     imm = make_imm()
     traj = simulate_batch(truth, num_runs, num_steps)
     zs, zs_np = traj.measurements, np.asarray(traj.measurements)
-    truth_np = np.asarray(traj.states)
     fp_runs = min(fp_runs, num_runs)
     scale = num_runs / fp_runs
     total = num_runs * num_steps

@@ -19,7 +19,6 @@ import resource
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import jaxtrack  # noqa: F401  (float64)

@@ -30,7 +30,6 @@ import dataclasses
 from typing import NamedTuple
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 from helpers import random_spd

@@ -13,7 +13,6 @@ from jaxtrack.design import (
     ho_reduction,
     local_search,
     newton_uniform_period,
-    per_step_design,
     relaxed_segment_design,
     round_counts,
     segment_exchange,

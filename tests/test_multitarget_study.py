@@ -9,7 +9,6 @@ size (no refused birth, the track count at the crossing) and the means against t
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from jaxtrack.applications import multitarget as mt

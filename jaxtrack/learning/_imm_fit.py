@@ -44,7 +44,7 @@ import numpy as np
 import optax
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 
-from .._validation import InputError, check_finite
+from .._validation import InputError
 from ..filters._base import FirstStep
 from ..filters._imm import InteractingMultipleModel, run_imm
 from ._loop import OptaxStepper, optimise

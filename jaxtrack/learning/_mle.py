@@ -57,7 +57,7 @@ import optax
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 
-from .._validation import InputError, check_finite
+from .._validation import InputError
 from ..filters._base import AbstractFilter, FirstStep, check_run_arguments, run_filter
 from ..filters._kalman import KalmanFilter
 from ..models import AbstractStateSpaceModel

@@ -22,7 +22,6 @@ import abc
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._validation import InputError, check_covariance, check_finite, check_shape

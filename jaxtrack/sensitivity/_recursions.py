@@ -217,7 +217,6 @@ def local_variations(
     """
     _check_first_step(first_step)
     T = history.filtered_cov.shape[0]
-    n = model.state_dim
     F, H = _stepwise(model, T)
     dF, dH = _stepwise(tangent, T)
     ks = jnp.arange(T)

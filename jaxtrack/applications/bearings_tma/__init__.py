@@ -29,8 +29,9 @@ from ...estimation import (
 from ...geometry import bearing as bearing, course as course
 from ...models import (
     RelativeBearingModel as RelativeBearingModel,
-    constant_velocity_transition as transition_matrix,
-    pseudolinear_measurement_row as measurement_row,
+    # The study's names for the library's functions (public: `bearings_tma.transition_matrix`).
+    constant_velocity_transition as transition_matrix,  # noqa: F401
+    pseudolinear_measurement_row as measurement_row,  # noqa: F401
 )
 from .analysis import (
     ErrorStatistics as ErrorStatistics,
