@@ -12,9 +12,9 @@ runs a ``while_loop`` over the merges actually made (:func:`_merge_vo_ma`,
 :func:`_merge_stonesoup`), whose ``custom_jvp`` is the fixed loops' JVP, so ``jax.grad`` works
 through either. Measured: Stone Soup's merging at ``J_max = 128``, ``M = 27`` (the scenario of
 ``benchmarks/rfs.py``) 175 ms a scan as fixed loops, 0.9 ms as the while loop; Table II's in the
-Williams (2015) scenario (``J_max = 128``, up to 40 measurements a scan, one run, whole filter
-step): GM-PHD 18.5 ms a scan with the fixed loops, 0.80 ms with the while loop, GM-CPHD 19.0 and
-1.19 ms (the same estimates: equal to rounding, see ``tests/test_gm_phd.py``).
+Williams (2015) scenario (``J_max = 100``, up to 40 measurements a scan, one run, whole filter
+step; ``benchmarks/pmbm.py``): GM-PHD 18.5 ms a scan with the fixed loops, 0.77 ms with the while
+loop, GM-CPHD 19.0 and 1.26 ms (the same estimates: equal to rounding, see ``tests/test_gm_phd.py``).
 """
 
 from __future__ import annotations
