@@ -8,8 +8,8 @@ the nominal truth), and on the same truths (the study's own functions,
 :func:`jaxtrack.applications.bearings_tma.bounds.bound_comparison`):
 
 - the PCRLB ``E[J]⁻¹`` (Tichavský et al. 1998; :func:`jaxtrack.bounds.pcrlb`, the study's bound);
-- the mean per-truth bound ``E[J(x)⁻¹]`` (:func:`jaxtrack.bounds.pcrlb_along` linearised along
-  each truth, then averaged);
+- the mean per-truth bound ``E[J(x)⁻¹]``
+  (:func:`~jaxtrack.applications.bearings_tma.bounds.mean_per_truth_bound`);
 - the study's EKF and its regularised particle filter
   (:func:`~jaxtrack.applications.bearings_tma.bounds.particle_filter`) with each of ``--particles``.
 
@@ -37,22 +37,8 @@ import numpy as np
 
 import jaxtrack  # noqa: F401  (float64)
 from jaxtrack.applications.bearings_tma import bounds as tb
-from jaxtrack.applications.bearings_tma.scenario import geometry
-from jaxtrack.bounds import pcrlb_along
-from jaxtrack.montecarlo import monte_carlo_map, simulate
 
 TIMES = (240.0, 480.0, 720.0, 960.0)  # s
-
-
-def per_truth_bound(name: str, key, num_runs: int) -> np.ndarray:
-    """Mean over the runs' truths of the position bound linearised along each truth, m², ``(K+1,)``."""
-    model = tb.bound_model(geometry(name))
-
-    def one(k, _):
-        b = pcrlb_along(model, simulate(model, k).states).bound
-        return b[:, 0, 0] + b[:, 1, 1]
-
-    return np.asarray(monte_carlo_map(one, key, num_runs, reduce="stack")).mean(axis=0)
 
 
 def main(argv=None) -> None:
@@ -65,7 +51,7 @@ def main(argv=None) -> None:
     key = dict(zip(("R1", "R2", "R3"), jax.random.split(jax.random.key(21), 3)))[a.geometry]
     print(f"bearings-only TMA, geometry {a.geometry}, {a.runs} truths from the prior, float64, "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}")
-    truth = per_truth_bound(a.geometry, key, a.runs)
+    truth = np.asarray(tb.mean_per_truth_bound(a.geometry, key, a.runs))
     for n in a.particles:
         t0 = time.perf_counter()
         c = tb.bound_comparison(a.geometry, key, a.runs, particles=n)

@@ -18,7 +18,6 @@ from jaxtrack.applications.bearings_tma import bounds as tb
 from jaxtrack.applications.bearings_tma import figure_bounds
 from jaxtrack.applications.bearings_tma import geometry
 from jaxtrack.bounds import pcrlb, pcrlb_along
-from jaxtrack.montecarlo import monte_carlo_map, simulate
 
 RUNS = 300  # CI size; the reproduction uses 2000
 
@@ -110,13 +109,7 @@ def test_particle_filter_is_efficient_where_the_ekf_is_not():
     about ±0.05 (1σ)."""
     name, key = "R1", jax.random.key(11)
     c = tb.bound_comparison(name, key, RUNS, particles=PF_PARTICLES)
-    model = tb.bound_model(geometry(name))
-
-    def per_truth(k, _):
-        b = pcrlb_along(model, simulate(model, k).states).bound
-        return b[:, 0, 0] + b[:, 1, 1]
-
-    per_truth_bound = np.asarray(monte_carlo_map(per_truth, key, RUNS, reduce="stack")).mean(axis=0)
+    per_truth_bound = np.asarray(tb.mean_per_truth_bound(name, key, RUNS))
     k240 = int(np.argmin(np.abs(np.asarray(c.times) - 240.0)))
     pf, ekf = np.asarray(c.efficiency("pf")), np.asarray(c.efficiency("ekf"))
     tight = np.sqrt(np.asarray(c.pf_mse) / per_truth_bound)

@@ -76,6 +76,13 @@ def _log_pow(k, x):
     return jnp.where(k == 0, 0.0, jnp.where(pos, k * jnp.log(jnp.where(pos, x, 1.0)), -jnp.inf))
 
 
+def _poisson_pmf(mu, N: int):
+    """``(Poisson(μ) pmf at n = 0..N, P(Poisson(μ) > N))``: the pmf in log space (``μ = 0`` gives
+    ``δ_0``) and the tail as ``P(N + 1, μ)``, the regularised lower incomplete gamma function."""
+    n = jnp.arange(N + 1)
+    return jnp.exp(_log_pow(n, mu) - mu - gammaln(n + 1.0)), gammainc(N + 1.0, mu)
+
+
 def _lse(x, axis=-1):
     """Log-sum-exp that returns ``−inf`` (not NaN, nor a NaN gradient) when every entry is ``−inf``."""
     m = jnp.max(x, axis=axis, keepdims=True)
@@ -310,11 +317,8 @@ class GMCPHD(eqx.Module):
                                                    open_low=True)
         self.truncation_tolerance = _scalar("truncation_tolerance", truncation_tolerance, low=0.0)
         mu = jnp.sum(self.birth_weights)
-        n = jnp.arange(N + 1)
         if birth_cardinality is None:
-            self.birth_cardinality = jnp.exp(_log_pow(n, mu) - mu - gammaln(n + 1.0))
-            # P(Poisson(μ) > N) = P(N + 1, μ), the regularised lower incomplete gamma function.
-            self.birth_tail = gammainc(N + 1.0, mu)
+            self.birth_cardinality, self.birth_tail = _poisson_pmf(mu, N)
         else:
             pg = jnp.asarray(birth_cardinality, float)
             if pg.ndim != 1 or not 1 <= pg.shape[0] <= N + 1:
@@ -346,9 +350,7 @@ class GMCPHD(eqx.Module):
         if self.initial_weights.shape[0] == 0:
             pmf, tail = jnp.zeros((N + 1,), dtype).at[0].set(1.0), jnp.zeros((), dtype)
         else:
-            mu, n = jnp.sum(self.initial_weights).astype(dtype), jnp.arange(N + 1)
-            pmf = jnp.exp(_log_pow(n, mu) - mu - gammaln(n + 1.0))
-            tail = gammainc(N + 1.0, mu)
+            pmf, tail = _poisson_pmf(jnp.sum(self.initial_weights).astype(dtype), N)
             pmf = pmf / jnp.sum(pmf)
         return CPHDState(mixture, pmf, tail, jnp.ones((), bool))
 

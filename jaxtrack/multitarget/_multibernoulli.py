@@ -21,7 +21,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
-from ._phd import _check_scans, _common_fields, _initial_fields, _pair_likelihoods, _scalar
+from ._phd import _check_scans, _common_fields, _in_slots, _initial_fields, _pair_likelihoods, _scalar
 from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
 
@@ -159,16 +159,11 @@ def _poisson_view(f):
 def _init_state(f, H: int) -> PMBMState:
     J, N, dtype = f.poisson_capacity, f.max_tracks, f.birth_means.dtype
     n = f.birth_means.shape[1]
-    B0 = f.initial_weights.shape[0]
-    pad = J - B0
-    fill_m = jnp.broadcast_to(f.birth_means[0], (pad, n))
-    fill_c = jnp.broadcast_to(f.birth_covs[0], (pad, n, n))
+    w0, m0, P0 = _in_slots(f, J, f.initial_weights, f.initial_means, f.initial_covs)
     i32 = jnp.int32
     return PMBMState(
-        poisson_weights=jnp.concatenate([f.initial_weights, jnp.zeros((pad,), dtype)]),
-        poisson_means=jnp.concatenate([f.initial_means, fill_m]),
-        poisson_covs=jnp.concatenate([f.initial_covs, fill_c]),
-        poisson_active=jnp.arange(J) < B0,
+        poisson_weights=w0, poisson_means=m0, poisson_covs=P0,
+        poisson_active=jnp.arange(J) < f.initial_weights.shape[0],
         existence=jnp.zeros((N, H), dtype),
         means=jnp.broadcast_to(f.birth_means[0], (N, H, n)),
         covs=jnp.broadcast_to(f.birth_covs[0], (N, H, n, n)),

@@ -207,18 +207,19 @@ def _empty_mixture(f) -> GMPHDMixture:
     )
 
 
+def _in_slots(f, capacity: int, weights, means, covs):
+    """``J0 <= capacity`` components in the first of ``capacity`` slots, as ``(weights, means,
+    covs)``; the free slots hold weight 0 and ``f``'s first birth component (finite moments)."""
+    pad, dtype = capacity - weights.shape[0], f.birth_means.dtype
+    return (jnp.concatenate([weights.astype(dtype), jnp.zeros((pad,), dtype)]),
+            jnp.concatenate([means.astype(dtype), jnp.broadcast_to(f.birth_means[0], (pad,) + means.shape[1:])]),
+            jnp.concatenate([covs.astype(dtype), jnp.broadcast_to(f.birth_covs[0], (pad,) + covs.shape[1:])]))
+
+
 def _initial_mixture(f) -> GMPHDMixture:
     """The time-0 intensity ``f.initial_*`` in the first slots (an empty mixture when none)."""
-    mix = _empty_mixture(f)
-    J0 = f.initial_weights.shape[0]
-    if J0 == 0:
-        return mix
-    dtype = mix.weights.dtype
-    w = f.initial_weights.astype(dtype)
-    return eqx.tree_at(
-        lambda x: (x.weights, x.means, x.covs, x.active), mix,
-        (mix.weights.at[:J0].set(w), mix.means.at[:J0].set(f.initial_means.astype(dtype)),
-         mix.covs.at[:J0].set(f.initial_covs.astype(dtype)), mix.active.at[:J0].set(w > 0.0)))
+    w, m, P = _in_slots(f, f.capacity, f.initial_weights, f.initial_means, f.initial_covs)
+    return eqx.tree_at(lambda x: (x.weights, x.means, x.covs, x.active), _empty_mixture(f), (w, m, P, w > 0.0))
 
 
 def _predict_intensity(f, mixture: GMPHDMixture):

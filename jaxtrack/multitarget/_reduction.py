@@ -46,6 +46,20 @@ def _reduce_mixture(f, weights, means, covs, active):
     return *out, num_pruned
 
 
+def _free_slots(J: int, free_mean, free_cov, dtype):
+    """``J`` empty output slots ``(weights, means, covs, active)``: weight 0, inactive, holding the
+    free component (finite moments)."""
+    n = free_mean.shape[0]
+    return (jnp.zeros((J,), dtype), jnp.broadcast_to(free_mean, (J, n)), jnp.broadcast_to(free_cov, (J, n, n)),
+            jnp.zeros((J,), bool))
+
+
+def _leftover(remaining, weights):
+    """``(num_dropped, dropped_weight)``: the candidates no slot took (``remaining``, in the
+    input's order), counted and summed so that an overflow is never silent."""
+    return jnp.sum(remaining).astype(jnp.int32), jnp.sum(jnp.where(remaining, weights, 0.0))
+
+
 def _merge_loops(J, ss, U, free_mean, free_cov, weights, means, covs, keep):
     """The merging into ``J`` slots as fixed loops (differentiable in both modes): a ``fori_loop``
     over the slots, each a vectorised Table II pass (``ss`` False) or, for Stone Soup's pairwise
@@ -105,9 +119,7 @@ def _merge_loops(J, ss, U, free_mean, free_cov, weights, means, covs, keep):
         return remaining, (w_o, m_o, P_o, a_o.at[slot].set(has))
 
     remaining, (w_o, m_o, P_o, a_o) = jax.lax.fori_loop(0, J, body, (keep, out))
-    num_dropped = jnp.sum(remaining).astype(jnp.int32)
-    dropped_weight = jnp.sum(jnp.where(remaining, weights, 0.0))
-    return w_o, m_o, P_o, a_o, num_dropped, dropped_weight
+    return w_o, m_o, P_o, a_o, *_leftover(remaining, weights)
 
 
 def _merge_pair(w_b, m_b, P_b, w_c, m_c, P_c, d):
@@ -172,16 +184,13 @@ def _merge_stonesoup(J, U, free_mean, free_cov, weights, means, covs, keep):
         p = jnp.where(found, h + 1, jnp.where(advance, q + ch, first_kept))
         return s, p, found | advance | seeding, running, rem, n_rem, (w, m, P, a)
 
-    out = (jnp.zeros((J,), dtype), jnp.broadcast_to(free_mean, (J, n)), jnp.broadcast_to(free_cov, (J, n, n)),
-           jnp.zeros((J,), bool))
+    out = _free_slots(J, free_mean, free_cov, dtype)
     running = (jnp.zeros((), dtype), jnp.zeros((n,), dtype), jnp.zeros((n, n), dtype))
     init = (jnp.zeros((), jnp.int32), first_kept, jnp.zeros((), bool), running, keep[order], K - first_kept, out)
     _, _, _, _, rem, _, (w, m, P, a) = jax.lax.while_loop(
         lambda c: c[2] | ((c[5] > 0) & (c[0] < J)), step, init)
     remaining = jnp.zeros((K,), bool).at[order].set(rem)  # back to the input's order, for the sum
-    num_dropped = jnp.sum(remaining).astype(jnp.int32)
-    dropped_weight = jnp.sum(jnp.where(remaining, weights, 0.0))
-    return w, m, P, a, num_dropped, dropped_weight
+    return w, m, P, a, *_leftover(remaining, weights)
 
 
 @_merge_stonesoup.defjvp
@@ -253,15 +262,12 @@ def _merge_vo_ma(J, U, free_mean, free_cov, weights, means, covs, keep):
         out = (w_out.at[s].set(wsum), m_out.at[s].set(mean), P_out.at[s].set(cov), a_out.at[s].set(True))
         return s + 1, rem & ~sel, n_rem - jnp.sum(sel).astype(jnp.int32), out
 
-    out = (jnp.zeros((J,), dtype), jnp.broadcast_to(free_mean, (J, n)), jnp.broadcast_to(free_cov, (J, n, n)),
-           jnp.zeros((J,), bool))
+    out = _free_slots(J, free_mean, free_cov, dtype)
     kept_o = jnp.arange(Kp) < num_kept
     _, rem, _, (w, m, P, a) = jax.lax.while_loop(lambda c: (c[2] > 0) & (c[0] < J), one_pass,
                                                  (jnp.zeros((), jnp.int32), kept_o, num_kept, out))
     remaining = jnp.zeros((K,), bool).at[order].set(rem[:K])  # back to the input's order, for the sum
-    num_dropped = jnp.sum(remaining).astype(jnp.int32)
-    dropped_weight = jnp.sum(jnp.where(remaining, weights, 0.0))
-    return w, m, P, a, num_dropped, dropped_weight
+    return w, m, P, a, *_leftover(remaining, weights)
 
 
 @_merge_vo_ma.defjvp
