@@ -29,6 +29,7 @@ from jaxtrack.filters import (
     run_filter_batch,
 )
 from jaxtrack.filters import _batch as batch_mod
+from jaxtrack.filters._batch import balanced_block, per_run_block
 from jaxtrack.filters._linalg import cholesky, matmul, tril_inverse
 from jaxtrack.models import LinearGaussianModel, constant_velocity
 from jaxtrack.montecarlo import monte_carlo, simulate
@@ -241,7 +242,7 @@ def test_monte_carlo_ekf_runs_per_run_and_agrees_on_a_linear_model():
 @pytest.mark.parametrize("covariance", ["auto", "per_run"])
 def test_monte_carlo_chunk_size_changes_nothing_and_never_recompiles(covariance, monkeypatch):
     """The compiled unit is a block of fixed size: any chunk size gives the same sums (bit for
-    bit) from one compilation, and so does any number of runs of at least one block."""
+    bit) from one compilation, and so does any number of runs dealt into blocks of that size."""
     traces = []
     for name in ("_shared_block", "_per_run_block"):
         original = getattr(mc_run, name)
@@ -252,14 +253,17 @@ def test_monte_carlo_chunk_size_changes_nothing_and_never_recompiles(covariance,
 
         monkeypatch.setattr(mc_run, name, counted)
     model = cv_model()
-    block = mc_run._SHARED_BLOCK if covariance == "auto" else mc_run._PER_RUN_BLOCK
-    num_runs = block + 7  # two blocks, the second padded
+    largest = mc_run._SHARED_BLOCK if covariance == "auto" else mc_run._PER_RUN_BLOCK
+    num_runs = largest + 7  # two blocks, the second padded
+    block = balanced_block(num_runs, largest)
     results = [
         monte_carlo(model, jax.random.key(8), num_runs, num_steps=13, chunk_size=chunk,
                     covariance=covariance, progress=False)
         for chunk in (1, 100, 333, 5 * block)
     ]
-    results.append(monte_carlo(model, jax.random.key(8), 2 * block + 1, num_steps=13,
+    # Another number of runs that is dealt into blocks of the same size: the same compilation.
+    assert balanced_block(2 * block - 1, largest) == block
+    results.append(monte_carlo(model, jax.random.key(8), 2 * block - 1, num_steps=13,
                                covariance=covariance, progress=False))
     for other in results[1:4]:
         for name in ("mse", "nees", "nis", "nees_std", "mean_error"):
@@ -268,6 +272,22 @@ def test_monte_carlo_chunk_size_changes_nothing_and_never_recompiles(covariance,
     # calls the block function once; the re-run that drops failed runs reuses that trace
     # (montecarlo._engine.run_excluding_failures).
     assert len(traces) in (0, 1) and len(set(traces)) <= 1, traces
+
+
+def test_blocks_are_balanced_and_sized_for_the_cpus():
+    """Runs are dealt into as few blocks of at most ``largest`` as possible, padded by less than
+    one grain a block; one CPU gets the cache-sized block, two get one XLA splits over both."""
+    for num_runs in (1, 7, 200, 511, 512, 513, 1000, 4096, 4103, 5000, 10_000, 100_000, 1_000_003):
+        block = balanced_block(num_runs, 4096)
+        num_blocks = -(-num_runs // block)
+        assert block <= 4096 and num_blocks == max(1, -(-num_runs // 4096)), num_runs
+        if num_runs > 512:
+            assert block % 512 == 0 and num_blocks * block - num_runs < 512 * num_blocks, num_runs
+        else:
+            assert block == 1 << (num_runs - 1).bit_length(), num_runs
+    assert balanced_block(10_000, 4096) == 3584  # 10,752 computed, not 12,288
+    assert balanced_block(10_000, 512) == 512 and balanced_block(300, 128) == 128
+    assert per_run_block(1) == 512 and per_run_block(2) == 4096 and per_run_block(64) == 16384
 
 
 def test_monte_carlo_replays_with_simulate_exactly():

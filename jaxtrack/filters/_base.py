@@ -108,7 +108,8 @@ class AbstractFilter(eqx.Module):
 
     ``batch_block`` (class-level): runs per ``vmap``-ed block in
     :func:`~jaxtrack.filters.run_filter_batch` when every run carries its own covariance (None: the
-    batch's default, 2,048); a filter whose step keeps larger buffers per run sets a smaller one.
+    batch's default, 4,096 on 2 CPUs, see ``filters._batch.per_run_block``); a filter whose step
+    keeps much larger buffers per run may set a smaller one.
     """
 
     square_root: ClassVar[bool] = False

@@ -45,7 +45,9 @@ from ..filters._base import FirstStep
 from ..filters._batch import (
     CovarianceMode,
     SharedCovariance,
+    balanced_block,
     mean_maps,
+    per_run_block,
     resolve_covariance,
     shared_covariances,
 )
@@ -54,7 +56,7 @@ from ..models import AbstractStateSpaceModel
 from ._metrics import normalized_squared_error
 from ._result import MonteCarloResult, _estimator_fields, _key_fields, _masked_sums, _Sums, _summarize, _zero_sums
 from ._noise import key_words, step_normals
-from ._engine import block_size_for, check_mesh, refuse_traced, run_blocks, run_excluding_failures
+from ._engine import check_mesh, refuse_traced, run_blocks, run_excluding_failures
 from ._sharding import RUN_AXIS, SWEEP_AXIS, axis_size
 from ._simulate import (
     _resolve_num_steps,
@@ -71,7 +73,10 @@ from ._simulate import (
 # not depend on `chunk_size` (which only sets how often progress is reported), so changing the
 # chunk size never recompiles. Fewer runs than a block use the next power of two.
 _SHARED_BLOCK = 2048  # shared covariance: (n, block) state, wide element-wise loops
-_PER_RUN_BLOCK = 512  # per-run covariance: (block, n, n) carries stay in cache
+# Per-run covariance: the per-run paths' block (filters._batch.per_run_block: 512 on one CPU, where
+# the (block, n, n) carries stay in cache; 2,048 a CPU above, where XLA splits the block's loops
+# over its threads).
+_PER_RUN_BLOCK = per_run_block()
 # An IMM step is many small kernels (M members' predict/update, mixing, combination): their
 # fixed cost per kernel is amortised over more runs in a wider block (3-member IMM, 8,192 × 200:
 # 0.42–0.46 M steps/s at 512, 0.53–0.60 at 2,048, 0.50 at 8,192).
@@ -441,7 +446,7 @@ def _prepare(truth, num_runs, num_steps, filter, filter_model, mask, first_step,
     else:
         shared = resolve_covariance(covariance, filter, filter_model, schedule_is_shared).shared
     largest = _SHARED_BLOCK if shared else (_IMM_BLOCK if filter_model is None else _PER_RUN_BLOCK)
-    block = block_size_for(num_runs, largest)
+    block = balanced_block(num_runs, largest)
     return _Prepared(filter, filter_model, num_steps, observed, shared, block, detection, run_mask, components,
                      num_scored, num_modes, estimator)
 
