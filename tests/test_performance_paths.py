@@ -30,7 +30,7 @@ from jaxtrack.filters import (
 )
 from jaxtrack.filters import _batch as batch_mod
 from jaxtrack.filters._batch import balanced_block, per_run_block
-from jaxtrack.filters._linalg import cholesky, matmul, tril_inverse
+from jaxtrack.filters._linalg import cholesky, congruence, matmul, tril_inverse
 from jaxtrack.models import LinearGaussianModel, constant_velocity
 from jaxtrack.montecarlo import monte_carlo, simulate
 from jaxtrack.montecarlo import _run as mc_run
@@ -272,6 +272,21 @@ def test_monte_carlo_chunk_size_changes_nothing_and_never_recompiles(covariance,
     # calls the block function once; the re-run that drops failed runs reuses that trace
     # (montecarlo._engine.run_excluding_failures).
     assert len(traces) in (0, 1) and len(set(traces)) <= 1, traces
+
+
+@pytest.mark.parametrize("shape", [(6, 6), (2, 4), (9, 9)])
+def test_congruence_is_a_p_at_and_exactly_symmetric(shape):
+    """filters._linalg.congruence (the UKF's affine prediction): a p aᵀ from its lower triangle,
+    per run under vmap as alone; n > 7 falls back to two products."""
+    rng = np.random.default_rng(4)
+    a = jnp.asarray(rng.standard_normal((5,) + shape))
+    b = rng.standard_normal((5, shape[1], shape[1]))
+    p = jnp.asarray(b @ np.swapaxes(b, 1, 2))
+    got = np.asarray(jax.vmap(congruence)(a, p))
+    want = np.asarray(a) @ np.asarray(p) @ np.swapaxes(np.asarray(a), 1, 2)
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+    np.testing.assert_array_equal(got, np.swapaxes(got, 1, 2))
+    np.testing.assert_allclose(congruence(a[0], p[0]), got[0], rtol=1e-15)
 
 
 def test_blocks_are_balanced_and_sized_for_the_cpus():

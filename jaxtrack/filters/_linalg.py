@@ -61,6 +61,28 @@ def matmul(a: Array, b: Array) -> Array:
     return out
 
 
+def congruence(a: Array, p: Array) -> Array:
+    """``a p aᵀ`` for a symmetric ``p``, exactly symmetric: the lower triangle, mirrored.
+
+    Under ``vmap`` XLA fuses the inner product ``a p`` into every element of the outer one, so
+    each of the ``n²`` outputs recomputes ``n`` entries of ``a p`` (``n⁴`` multiply-adds, the
+    largest cost of the README radar's UKF prediction); computing the ``n(n+1)/2`` distinct
+    entries only nearly halves that.
+
+    **Arguments:** ``a`` ``(q, n)``; ``p`` ``(n, n)``, symmetric.
+
+    **Returns:** ``a p aᵀ``, ``(q, q)``, symmetric.
+    """
+    q, n = a.shape
+    if n > MATMUL_UNROLL_MAX:
+        out = matmul(matmul(a, p), a.T)
+        return 0.5 * (out + out.T)
+    ap = matmul(a, p)
+    lower = {(i, j): sum(ap[i, k] * a[j, k] for k in range(1, n)) + ap[i, 0] * a[j, 0]
+             for i in range(q) for j in range(i + 1)}
+    return jnp.stack([jnp.stack([lower[max(i, j), min(i, j)] for j in range(q)]) for i in range(q)])
+
+
 def cholesky(a: Float[Array, "d d"], unroll_max: int = UNROLL_MAX) -> Float[Array, "d d"]:
     """Lower Cholesky factor ``L`` (``L Lᵀ = a``) of a symmetric positive definite ``a``.
 

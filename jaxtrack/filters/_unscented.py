@@ -11,7 +11,7 @@ from jaxtyping import Array
 from .._validation import InputError
 from ..models._components import affine_transition_matrix
 from ._base import AbstractFilter, condition_on_moments, symmetrize
-from ._linalg import cholesky, matmul
+from ._linalg import cholesky, congruence, matmul
 
 
 # The update factorises the predicted covariance of every run at every step; up to 6 states
@@ -140,8 +140,7 @@ class UnscentedKalmanFilter(AbstractFilter):
     def predict(self, model, mean, cov, k):
         F = affine_transition_matrix(model, k)
         if F is not None:
-            pred_cov = matmul(matmul(F, cov), F.T) + model.process_noise_cov(k)
-            return model.transition(mean, k), symmetrize(pred_cov)
+            return model.transition(mean, k), congruence(F, cov) + model.process_noise_cov(k)
         n = mean.shape[0]
         w, c0, scale = self._weights(n)
         points = sigma_points(mean, cholesky(cov), scale)
