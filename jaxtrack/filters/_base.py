@@ -22,7 +22,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from .._export import Exportable
 from .._validation import InputError, check_shape, covariance_ok, is_concrete
 from ..models import AbstractStateSpaceModel
-from ._linalg import marginal_cov
+from ._linalg import all_rows, marginal_cov
 from ._parallel import AbstractTimeScan, AutoScan, Sequential, resolve_scan
 from ._updates import (  # noqa: F401  (re-exported: the update functions' historical home)
     AbstractUpdateForm,
@@ -220,9 +220,9 @@ class AbstractFilter(eqx.Module):
             pred_cov = jnp.where(at_start, state.cov, pred_cov)
         post = self.update(model, pred_mean, pred_cov, z, observed, k)
         ll = state.log_likelihood + post.log_likelihood
-        finite = (
-            jnp.all(jnp.isfinite(post.mean)) & jnp.all(jnp.isfinite(post.cov)) & jnp.isfinite(ll)
-        )
+        # `all_rows` (ands) rather than jnp.all (a reduction, a kernel of its own per step under vmap).
+        finite = (all_rows(jnp.isfinite(post.mean)) & all_rows(all_rows(jnp.isfinite(post.cov)))
+                  & jnp.isfinite(ll))
         new_state = FilterState(post.mean, post.cov, ll, k + 1, state.ok & finite)
         return new_state, StepOutput(pred_mean, pred_cov, post)
 

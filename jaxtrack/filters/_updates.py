@@ -23,7 +23,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from ._linalg import cholesky_and_inverse, matmul, tril_inverse
+from ._linalg import cholesky_and_inverse, matmul, sum_rows, tril_inverse
 
 
 def symmetrize(a: Array) -> Array:
@@ -86,8 +86,10 @@ def gaussian_log_likelihood(innovation, innovation_cov_chol, num_observed, chol_
     if chol_inv is None:
         chol_inv = tril_inverse(innovation_cov_chol)
     whitened = matmul(chol_inv, innovation)
-    log_det = 2.0 * jnp.sum(jnp.log(jnp.diagonal(innovation_cov_chol)))
-    return -0.5 * (whitened @ whitened + log_det + num_observed * math.log(2.0 * math.pi))
+    # Sums over m terms as adds (sum_rows): under vmap a reduction is a kernel of its own per
+    # step (README radar UKF, 4,096 runs: 6% of the step), the adds fuse with their neighbours.
+    log_det = 2.0 * sum_rows(jnp.log(jnp.diagonal(innovation_cov_chol)))
+    return -0.5 * (sum_rows(whitened * whitened) + log_det + num_observed * math.log(2.0 * math.pi))
 
 
 class AbstractUpdateForm(eqx.Module):
