@@ -130,6 +130,18 @@ def test_one_member_equals_its_filter(linear_data):
         np.testing.assert_array_equal(res.mode_probs, 1.0)
 
 
+def test_a_run_that_overflows_is_not_ok(linear_data):
+    """A measurement that overflows the update (1e300 m) makes the run non-finite: ok is False
+    (the step checks the members' posteriors, the mode probabilities and the log-likelihood)."""
+    zs = np.array(linear_data[:20])
+    imm = InteractingMultipleModel([(KalmanFilter(), _cv_model(0.01)), (KalmanFilter(), _cv_model(4.0))], PTRANS)
+    assert bool(run_imm(imm, zs).ok)
+    zs[12] = [1e300, -1e300]
+    res = run_imm(imm, zs, throw=False)
+    assert not bool(res.ok)
+    assert not np.all(np.isfinite(np.asarray(res.filtered_cov[12:])))
+
+
 # --------------------------------------------------------------------------------------------
 # nonlinear: EKF members, NumPy IMM from the textbook equations (BLK 2001 §11.6.6)
 
