@@ -54,7 +54,11 @@ def _schedulable_cpus() -> int:
 
 
 def per_run_block(cpus: int | None = None) -> int:
-    """Runs per ``vmap``-ed block on the per-run paths (:func:`run_filter_batch`, Monte Carlo).
+    """Runs per ``vmap``-ed block on :func:`run_filter_batch`'s per-run path.
+
+    (Monte Carlo keeps a fixed 4,096, ``montecarlo._run._PER_RUN_BLOCK``: its sums over a block's
+    runs round by the block's size, and a key gives the same statistics on every machine. Here
+    each run is computed alone, with no sum across runs.)
 
     Every leaf of a per-run step is ``(block, …)``: a few states or sigma points per run. XLA's
     CPU backend splits an element-wise loop over that leading run axis across its threads only

@@ -47,7 +47,6 @@ from ..filters._batch import (
     SharedCovariance,
     balanced_block,
     mean_maps,
-    per_run_block,
     resolve_covariance,
     shared_covariances,
 )
@@ -71,12 +70,17 @@ from ._simulate import (
 
 # Runs per compiled block. The block is the unit of compilation and of device work; it does
 # not depend on `chunk_size` (which only sets how often progress is reported), so changing the
-# chunk size never recompiles. Fewer runs than a block use the next power of two.
+# chunk size never recompiles. Fewer runs than a block use the next power of two; more are
+# dealt into blocks of at most this size, evened out (filters._batch.balanced_block). The sizes
+# are constants, not the machine's (run_filter_batch sizes its blocks by the CPUs, see
+# filters._batch.per_run_block): the sums over a block's runs round by its size, and a key must
+# give the same statistics to the last bit on every machine, and every host of a mesh must
+# compile the same block.
 _SHARED_BLOCK = 2048  # shared covariance: (n, block) state, wide element-wise loops
-# Per-run covariance: the per-run paths' block (filters._batch.per_run_block: 512 on one CPU, where
-# the (block, n, n) carries stay in cache; 2,048 a CPU above, where XLA splits the block's loops
-# over its threads).
-_PER_RUN_BLOCK = per_run_block()
+# Per-run covariance: 4,096 runs, where XLA splits the block's loops over 2 threads (512, which
+# keeps the (block, n, n) carries in cache, was never split: range-bearing UKF 16,384 x 200 on
+# 2 CPUs 1.73 s at 512, 1.20 s at 4,096, EKF 1.25 -> 0.91 s; on one CPU 4,096 is 14-16% slower).
+_PER_RUN_BLOCK = 4096
 # An IMM step is many small kernels (M members' predict/update, mixing, combination): their
 # fixed cost per kernel is amortised over more runs in a wider block (3-member IMM, 8,192 × 200:
 # 0.42–0.46 M steps/s at 512, 0.53–0.60 at 2,048, 0.50 at 8,192).
