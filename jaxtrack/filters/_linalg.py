@@ -78,8 +78,7 @@ def congruence(a: Array, p: Array) -> Array:
         out = matmul(matmul(a, p), a.T)
         return 0.5 * (out + out.T)
     ap = matmul(a, p)
-    lower = {(i, j): sum(ap[i, k] * a[j, k] for k in range(1, n)) + ap[i, 0] * a[j, 0]
-             for i in range(q) for j in range(i + 1)}
+    lower = {(i, j): matmul(ap[i], a[j]) for i in range(q) for j in range(i + 1)}
     return jnp.stack([jnp.stack([lower[max(i, j), min(i, j)] for j in range(q)]) for i in range(q)])
 
 

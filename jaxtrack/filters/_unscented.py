@@ -10,7 +10,7 @@ from jaxtyping import Array
 
 from .._validation import InputError
 from ..models._components import affine_transition_matrix
-from ._base import AbstractFilter, condition_on_moments, symmetrize
+from ._base import AbstractFilter, condition_on_moments
 from ._linalg import cholesky, congruence, matmul, sum_rows
 
 
@@ -136,8 +136,8 @@ class UnscentedKalmanFilter(AbstractFilter):
         points = sigma_points(mean, cholesky(cov), scale)
         propagated = jax.vmap(model.transition, in_axes=(0, None))(points, k)
         offset, spread = _moments_about_centre(propagated[1:] - propagated[0][None, :], w, c0)
-        # Σ w d dᵀ is symmetric in exact arithmetic; rounding in the sum of products is not.
-        return propagated[0] + offset, symmetrize(spread + model.process_noise_cov(k))
+        # Exactly symmetric already: every term a_i a_iᵀ and d̄ d̄ᵀ is (products commute).
+        return propagated[0] + offset, spread + model.process_noise_cov(k)
 
     def update(self, model, mean, cov, z, observed, k):
         n = mean.shape[0]
