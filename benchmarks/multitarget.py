@@ -20,7 +20,7 @@ Timed:
 
 - **jaxtrack**: ``jax.jit(jax.vmap(run_tracker))`` over blocks of ``--block`` runs (default 16)
   × 100 scans, the blocks one after another, ``--runs`` runs in all (the scans drawn with NumPy,
-  not ``tracker_monte_carlo``, so that Stone Soup gets the very same detections). A call returns
+  not ``multitarget_monte_carlo``, so that Stone Soup gets the very same detections). A call returns
   every scan's track means, statuses and ids ``(B, T, N, ·)`` and the refused births; the
   association matrices and covariances are not returned (XLA drops them). Blocks, because the
   time per scan grows with the batch on a 2-core CPU (measured: 2.5 ms per scan with 16 runs a

@@ -241,7 +241,7 @@ def test_score_tracks_counts_switches_breaks_and_false_tracks():
 
 def test_tracker_monte_carlo_is_the_runs_it_says():
     """Run i of the Monte Carlo is simulate_scenario(fold_in(key, i)) tracked and scored."""
-    from jaxtrack.multitarget import Scenario, score_tracks, simulate_scenario, tracker_monte_carlo
+    from jaxtrack.multitarget import Scenario, multitarget_monte_carlo, score_tracks, simulate_scenario
 
     model = _model()
     scenario = Scenario(
@@ -251,7 +251,7 @@ def test_tracker_monte_carlo_is_the_runs_it_says():
     )
     tracker = _tracker(GNN())
     key = jax.random.key(5)
-    mc = tracker_monte_carlo(tracker, scenario, key, 3, cutoff=10.0, block_size=4)
+    mc = multitarget_monte_carlo(tracker, scenario, key, 3, cutoff=10.0, block_size=4)
     score = jax.jit(lambda *a: score_tracks(*a, cutoff=10.0))
     per_run = []
     for i in range(3):

@@ -3,7 +3,7 @@ on one device or sharded over devices and hosts."""
 
 from ._cep import circular_error_probable as circular_error_probable
 from ._ospa import GOSPA as GOSPA, OSPA as OSPA, gospa as gospa, ospa as ospa
-from ._engine import monte_carlo_map as monte_carlo_map
+from ._engine import MonteCarloInterrupted as MonteCarloInterrupted, monte_carlo_map as monte_carlo_map
 from ._differentiable import differentiable_monte_carlo as differentiable_monte_carlo
 from ._metrics import (
     Interval as Interval,
@@ -33,6 +33,7 @@ __all__ = [
     "gospa",
     "ospa",
     "monte_carlo_map",
+    "MonteCarloInterrupted",
     "Interval",
     "chi2_mean_bounds",
     "normalized_squared_error",

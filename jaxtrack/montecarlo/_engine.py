@@ -37,6 +37,23 @@ BlockFn = Callable[[Any, Any, PRNGKeyArray, jax.Array, jax.Array], PyTree]
 Accumulate = Callable[[PyTree, PyTree, jax.Array], PyTree]
 
 
+class MonteCarloInterrupted(KeyboardInterrupt):
+    """Ctrl-C (SIGINT) during :func:`run_blocks`, carrying what had finished.
+
+    It is a ``KeyboardInterrupt``, so a program that does not look at it stops as on any Ctrl-C
+    (the CLI exits 130). ``totals``: the accumulated totals of the first ``num_runs_done`` runs
+    (host arrays; whole blocks in block order, so exactly what a run of ``num_runs_done`` runs
+    would have given), or None when no block had finished; a caller may attach a result built
+    from them as ``partial`` (the multi-target Monte Carlo does).
+    """
+
+    def __init__(self, totals, num_runs_done: int):
+        super().__init__(f"interrupted after {num_runs_done} runs")
+        self.totals = totals
+        self.num_runs_done = num_runs_done
+        self.partial = None
+
+
 def add_totals(totals, delta, start):
     """The default accumulation: running sums (``start`` unused).
 
@@ -215,12 +232,38 @@ def run_blocks(
     # also waits whenever about _WAIT_SECONDS of work is queued (the rate is measured at each
     # wait), and waits by polling, so a KeyboardInterrupt is raised within one poll interval
     # even while a round runs. Waiting never changes the results.
+    seen = _Dispatched()
+    try:
+        return _rounds(step, totals, num_runs, num_rounds, runs_per_round, rounds_per_chunk, progress, desc, seen)
+    except KeyboardInterrupt:
+        pass
+    # What the rounds dispatched before the interrupt give (a dispatched round is waited for: its
+    # totals are whole). A second Ctrl-C while waiting gives up the partial totals.
+    partial, runs = None, 0
+    if seen.totals is not None:
+        try:
+            partial, runs = local_value(_wait(seen.totals)), seen.runs
+        except KeyboardInterrupt:
+            partial, runs = None, 0
+    raise MonteCarloInterrupted(partial, runs) from None
+
+
+class _Dispatched:
+    """The latest dispatched totals and the runs they hold (updated as rounds are dispatched)."""
+
+    totals = None
+    runs = 0
+
+
+def _rounds(step, totals, num_runs, num_rounds, runs_per_round, rounds_per_chunk, progress, desc, seen):
+    """:func:`run_blocks`' loop over rounds (``seen`` tracks what was dispatched)."""
     rounds_per_wait = 1
     with tqdm(total=num_runs, desc=desc, unit="run", disable=not progress) as bar:
         done = 0
         last_round, last_time = 0, time.perf_counter()
         for r in range(num_rounds):
             totals = step(totals, r * runs_per_round)
+            seen.totals, seen.runs = totals, min((r + 1) * runs_per_round, num_runs)
             report = (r + 1) % rounds_per_chunk == 0 or r + 1 == num_rounds
             if report or r + 1 - last_round >= rounds_per_wait:
                 totals = _wait(totals)
@@ -263,6 +306,12 @@ def _run_keys(key, start, block):
 def _map_block_sum(common, value, key, start, valid):
     fn, args = common
     out = jax.vmap(fn, in_axes=(0, None))(_run_keys(key, start, valid.shape[0]), args)
+    return masked_run_sums(out, valid)
+
+
+def masked_run_sums(out: PyTree, valid: jax.Array) -> PyTree:
+    """The sums over a block's runs (leading axis) of every leaf of ``out``, padded runs
+    (``valid`` False) left out; booleans and integers summed as int32 counts."""
 
     def masked_sum(a):
         a = jnp.asarray(a)

@@ -8,10 +8,14 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
   range–bearing radar) and :func:`williams15` (the coalescence scenario of Williams 2015 as
   García-Fernández's PMBM reference defines it, with its fixed truth and the reference's filter
   settings, :class:`Williams15Settings`);
+- ``_base``: the contract every multi-target method implements
+  (:class:`AbstractMultiTargetFilter`: ``init``, ``step``, ``estimates``, ``capacity_events``),
+  :class:`Estimates`, and :func:`run_multitarget`, the one scan that runs them all;
 - ``_tracker``: :class:`TrackTable`, :class:`Tracker` (association method as a strategy),
   :func:`run_tracker`;
 - ``_evaluation``: :func:`score_tracks` (GOSPA per scan, track counts) and
-  :func:`tracker_monte_carlo` (the Monte Carlo engine's run primitive over a scenario);
+  :func:`multitarget_monte_carlo` (any method on a scenario through the Monte Carlo engine's run
+  primitive; ``tracker_monte_carlo`` is its deprecated former name);
 - ``_phd``: :class:`GMPHD` (the Gaussian-mixture PHD filter of Vo & Ma 2006 with a fixed
   component budget) and :func:`run_phd`;
 - ``_cphd``: :class:`GMCPHD` (the Gaussian-mixture CPHD filter of Vo, Vo & Cantoni 2007: the
@@ -41,9 +45,17 @@ from ._named_scenarios import (
     crossing_targets as crossing_targets,
     williams15 as williams15,
 )
+from ._base import (
+    AbstractMultiTargetFilter as AbstractMultiTargetFilter,
+    Estimates as Estimates,
+    MultiTargetResult as MultiTargetResult,
+    run_multitarget as run_multitarget,
+)
 from ._evaluation import (
+    MultiTargetMonteCarloResult as MultiTargetMonteCarloResult,
     TrackerMonteCarloResult as TrackerMonteCarloResult,
     TrackScores as TrackScores,
+    multitarget_monte_carlo as multitarget_monte_carlo,
     score_tracks as score_tracks,
     tracker_monte_carlo as tracker_monte_carlo,
 )
@@ -110,6 +122,12 @@ __all__ = [
     "TrackManagement",
     "TrackTable",
     "run_tracker",
+    "AbstractMultiTargetFilter",
+    "Estimates",
+    "MultiTargetResult",
+    "run_multitarget",
+    "MultiTargetMonteCarloResult",
+    "multitarget_monte_carlo",
     "TrackerMonteCarloResult",
     "TrackScores",
     "score_tracks",

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -57,8 +57,8 @@ from ._phd import (
     _predict_intensity,
     _scalar,
     _updated_layout,
-    _warn_capacity,
 )
+from ._base import AbstractMultiTargetFilter, Estimates, scan_method, scan_ok, warn_capacity
 from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
 
@@ -193,7 +193,7 @@ class CPHDResult(eqx.Module):
 
 
 # ------------------------------------------------------------------------------ the filter
-class GMCPHD(eqx.Module):
+class GMCPHD(AbstractMultiTargetFilter):
     r"""The GM-CPHD filter of Vo, Vo & Cantoni (2007) with fixed budgets ``J_max`` (components) and
     ``N_max`` (cardinality).
 
@@ -270,6 +270,7 @@ class GMCPHD(eqx.Module):
     max_cardinality: int = eqx.field(static=True)
     max_estimates: int = eqx.field(static=True)
     reduction: str = eqx.field(static=True, default="vo-ma")
+    labelled: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -436,6 +437,7 @@ class GMCPHD(eqx.Module):
         valid = jnp.asarray(valid, bool)
         predicted, predicted_pmf, truncated = self.predict(state)
         w, m, P, active, pmf, ok = self.update(predicted, predicted_pmf, measurements, valid, mixture.step)
+        ok = ok & scan_ok(measurements, valid)
         updated_mass = jnp.sum(jnp.where(active, w, 0.0))
         w, m, P, active, n_drop, w_drop, n_pruned = _reduce_mixture(self, w, m, P, active)
         new_mixture = GMPHDMixture(w, m, P, active, mixture.step + 1, mixture.num_dropped + n_drop,
@@ -443,7 +445,21 @@ class GMCPHD(eqx.Module):
         new = CPHDState(new_mixture, pmf, state.truncated_mass + truncated, state.ok & ok)
         return new, GMCPHDStepInfo(predicted_pmf, truncated, updated_mass, n_drop, w_drop, n_pruned, ok)
 
-    def estimates(self, state: CPHDState):
+    def estimates(self, state: CPHDState) -> Estimates:
+        """The reported targets (:meth:`_extract`): :class:`~jaxtrack.multitarget.Estimates`, ``ids``
+        the row index (−1 where masked; the GM-CPHD has no labels)."""
+        states, mask, _ = self._extract(state)
+        return Estimates(states, mask, jnp.where(mask, jnp.arange(self.max_estimates, dtype=jnp.int32), -1))
+
+    def capacity_events(self, state: CPHDState) -> Int[Array, ""]:
+        """Components the reduction left over for want of slots, summed over the scans so far."""
+        return state.mixture.num_dropped
+
+    def capacity_message(self, events: int) -> str:
+        return (f"the GM-CPHD mixture's capacity ({self.capacity} components) was too small: {events} components "
+                "were left over by the reduction; raise `capacity`")
+
+    def _extract(self, state: CPHDState):
         r"""Multi-target state extraction: ``n̂ = argmax_n p_k(n)`` (MAP cardinality), then the
         means of the ``n̂`` heaviest components (fewer if fewer are active), padded to ``max_estimates``.
 
@@ -460,18 +476,16 @@ class GMCPHD(eqx.Module):
         return states, mask, n_hat
 
 
-@eqx.filter_jit
-def _run_cphd(cphd, measurements, valid):
-    def body(state, scan):
-        state, info = cphd.step(state, *scan)
-        states, mask, count = cphd.estimates(state)
-        mix = state.mixture
-        out = (mix.weights, mix.means, mix.covs, mix.active, state.cardinality_pmf, state.mean_cardinality,
-               state.map_cardinality, mix.cardinality, info.updated_intensity_mass, info.truncated_mass,
-               states, mask, count, info.num_dropped, info.dropped_weight, info.ok)
-        return state, out
+def _record_cphd(cphd, state, info):
+    states, mask, count = cphd._extract(state)
+    mix = state.mixture
+    return (mix.weights, mix.means, mix.covs, mix.active, state.cardinality_pmf, state.mean_cardinality,
+            state.map_cardinality, mix.cardinality, info.updated_intensity_mass, info.truncated_mass,
+            states, mask, count, info.num_dropped, info.dropped_weight, info.ok)
 
-    final, outs = jax.lax.scan(body, cphd.init(), (measurements, valid))
+
+def _run_cphd(cphd, measurements, valid):
+    final, outs = scan_method(cphd, measurements, valid, _record_cphd)
     truncated = jnp.any(outs[9] > cphd.truncation_tolerance)
     return CPHDResult(*outs, final.mixture.overflow, truncated, final)
 
@@ -494,7 +508,7 @@ def run_cphd(cphd: GMCPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: b
     measurements, valid = _check_scans(measurements, valid, cphd.model.meas_dim)
     result = _run_cphd(cphd, measurements, valid)
     if warn:
-        _warn_capacity("GM-CPHD", cphd.capacity, result)
+        warn_capacity(cphd, result.final.mixture.num_dropped)
         if is_concrete(result.truncated) and bool(result.truncated):
             warnings.warn(
                 f"the GM-CPHD's cardinality budget (max_cardinality = {cphd.max_cardinality}) was too small: "

@@ -5,15 +5,18 @@
   optimal assignment, the track-level counts a tracking paper reports (Ristic, Vo, Clark & Vo
   2011, "A metric for performance evaluation of multi-target tracking algorithms", §II, for
   the switch count; Blackman & Popoli 1999, §13.6, for false and broken tracks).
-- :func:`tracker_monte_carlo`: the Monte Carlo of a tracker on a scenario through the same run
-  primitive as every jaxtrack Monte Carlo (:func:`jaxtrack.montecarlo.monte_carlo_map`: run ``i``
-  from ``fold_in(key, i)``, blocks of vmapped runs, streaming sums), so that run ``i`` is
-  ``simulate_scenario(scenario, fold_in(key, i))`` tracked by ``run_tracker``.
+- :func:`multitarget_monte_carlo`: the Monte Carlo of any multi-target method (the contract of
+  :mod:`._base`) on a scenario through the same run primitive as every jaxtrack Monte Carlo
+  (:func:`jaxtrack.montecarlo.run_blocks`: run ``i`` from ``fold_in(key, i)``, blocks of vmapped
+  runs, streaming sums), so that run ``i`` is ``simulate_scenario(scenario, fold_in(key, i))``
+  run through :func:`~jaxtrack.multitarget.run_multitarget`'s scan. Every run's GOSPA per scan is
+  kept too; ``tracker_monte_carlo`` is its former name.
 """
 
 from __future__ import annotations
 
 import warnings
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -21,15 +24,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from .._export import Exportable
 from .._validation import InputError, as_key
 from ..models._layout import position_indices
-from ..montecarlo._engine import monte_carlo_map
+from ..montecarlo._engine import MonteCarloInterrupted, block_size_for, masked_run_sums, refuse_traced, run_blocks
 from ..montecarlo._ospa import GOSPA, gospa
+from ._base import AbstractMultiTargetFilter, check_method, scan_method
 from ._scenario import CapacityWarning, Scenario, _check_scenario, _simulate_one
-from ._tracker import CONFIRMED, Tracker, _run_tracker
 
 
-class TrackScores(eqx.Module):
+class TrackScores(Exportable, eqx.Module):
     """Track-level counts of one run (integers; summed over runs they stay counts).
 
     A confirmed track is one stretch of scans in which a slot holds the same track id with
@@ -45,6 +49,8 @@ class TrackScores(eqx.Module):
     - ``num_breaks``: scans at which a target alive and assigned in the previous scan has no
       track (track breaks; a lost target that is later picked up again counts once per break).
     """
+
+    _export_kind: ClassVar[str] = "jaxtrack.TrackScores"
 
     num_confirmed: Int[Array, ""]
     num_false: Int[Array, ""]
@@ -125,23 +131,41 @@ def score_tracks(
     return per_step, TrackScores(counts[0], counts[1], counts[2], counts[3])
 
 
-class TrackerMonteCarloResult(eqx.Module):
-    """A tracker's Monte Carlo on a scenario: GOSPA per scan with its parts, and track counts.
+class MultiTargetMonteCarloResult(Exportable, eqx.Module):
+    """A multi-target method's Monte Carlo on a scenario: GOSPA per scan with its parts, track
+    counts, and every run's GOSPA.
 
-    **Fields** (``T`` scans; means over ``num_runs`` runs):
+    **Fields** (``T`` scans, ``R = num_runs`` runs; means over the runs):
 
     - ``gospa`` ``(T,)``: the mean GOSPA distance per scan (units of the positions);
       ``gospa_interval`` ``(T, 2)``: its 95% confidence interval (normal approximation,
       ``mean ± 1.96 s/√R``).
     - ``localisation``, ``missed``, ``false`` ``(T,)``: the means of GOSPA's parts (units to the
       power ``p``); ``num_targets``, ``num_tracks`` ``(T,)``: mean numbers of alive targets and of
-      confirmed tracks (a random-finite-set filter's estimates).
-    - ``scores``: the :class:`TrackScores` averaged over runs (floats).
-    - ``scans_overflowed``, ``births_dropped``: totals over all runs (ints): scans that held more
-      than ``max_measurements`` and capacity events: track births refused for want of table
-      slots (a tracker), or the filter's capacity events (see :func:`tracker_monte_carlo`).
-    - ``num_runs``, ``cutoff``, ``order``: what was run.
+      reported targets (confirmed tracks, a random-finite-set filter's estimates).
+    - ``per_run_gospa`` ``(R, T)``: every run's GOSPA distance per scan (run ``i`` from
+      ``fold_in(key, i)``), for other statistics than the mean (quantiles, a paired comparison of
+      two methods on the same runs).
+    - ``scores``: the :class:`TrackScores` averaged over runs (floats; meaningful for labelled
+      methods only: a GM-PHD's rows carry no identity).
+    - ``scans_overflowed``, ``capacity_events``: totals over all runs (ints): scans that held more
+      than ``max_measurements``, and the method's capacity events
+      (:meth:`~jaxtrack.multitarget.AbstractMultiTargetFilter.capacity_events`); ``scans_not_ok``:
+      scans whose step was not ``ok``.
+    - ``num_runs``, ``cutoff``, ``order``; ``completed``: False for the partial result of an
+      interrupted run (the first ``num_runs`` runs, whole blocks), ``method_name``: the method's class.
     """
+
+    _export_kind: ClassVar[str] = "jaxtrack.MultiTargetMonteCarloResult"
+    _export_dims: ClassVar[dict] = {
+        "gospa": ("scan",), "gospa_interval": ("scan", "bound"), "localisation": ("scan",), "missed": ("scan",),
+        "false": ("scan",), "num_targets": ("scan",), "num_tracks": ("scan",), "per_run_gospa": ("run", "scan"),
+    }
+    _export_units: ClassVar[dict] = {
+        "gospa": "position units", "gospa_interval": "position units", "per_run_gospa": "position units",
+        "localisation": "position units^p", "missed": "position units^p", "false": "position units^p",
+        "num_targets": "count", "num_tracks": "count",
+    }
 
     gospa: Float[Array, " T"]
     gospa_interval: Float[Array, "T 2"]
@@ -150,64 +174,102 @@ class TrackerMonteCarloResult(eqx.Module):
     false: Float[Array, " T"]
     num_targets: Float[Array, " T"]
     num_tracks: Float[Array, " T"]
+    per_run_gospa: Float[Array, "R T"]
     scores: TrackScores
     scans_overflowed: int = eqx.field(static=True)
-    births_dropped: int = eqx.field(static=True)
+    capacity_events: int = eqx.field(static=True)
+    scans_not_ok: int = eqx.field(static=True)
     num_runs: int = eqx.field(static=True)
     cutoff: float = eqx.field(static=True)
     order: float = eqx.field(static=True)
+    completed: bool = eqx.field(static=True, default=True)
+    method_name: str = eqx.field(static=True, default="")
 
     def mean_gospa(self) -> float:
         """The GOSPA distance averaged over runs and scans (one number per method)."""
         return float(np.mean(self.gospa))
 
+    @property
+    def births_dropped(self) -> int:
+        """Former name of :attr:`capacity_events`."""
+        return self.capacity_events
 
-def _method_estimates(method, measurements, valid):
-    """A method's estimates over one run, as ``(states (T, K, n), reported (T, K), ids (T, K),
-    capacity_events ())``: a tracker's confirmed tracks, a GM-PHD's or GM-CPHD's extracted
-    estimates (no labels: the slot index stands for the id), a PMBM's or PMB's estimated tracks."""
-    from ._cphd import GMCPHD, _run_cphd
-    from ._multibernoulli import _run as _run_mb
-    from ._phd import GMPHD, _run_phd
 
-    if isinstance(method, Tracker):
-        r = _run_tracker(method, measurements, valid, False)
-        return r.mean, r.status == CONFIRMED, r.track_id, r.final.num_dropped_births
-    if isinstance(method, (GMPHD, GMCPHD)):
-        r = (_run_phd if isinstance(method, GMPHD) else _run_cphd)(method, measurements, valid)
-        slots = jnp.broadcast_to(jnp.arange(r.estimate_mask.shape[1], dtype=jnp.int32), r.estimate_mask.shape)
-        return r.estimates, r.estimate_mask, slots, jnp.sum(r.num_dropped)
-    r = _run_mb(method, measurements, valid)
-    fs = r.final
-    events = fs.num_dropped_tracks + fs.poisson_num_dropped + fs.assignment_overflow + jnp.sum(~r.association_ok)
-    return r.estimates, r.estimate_mask, r.estimate_id, events
+TrackerMonteCarloResult = MultiTargetMonteCarloResult  # the former name
+
+
+def _record_estimates(method, state, info):
+    return method.estimates(state), info.ok, method.capacity_events(state)
 
 
 def _one_run(key, args):
-    tracker, scenario, target_idx, track_idx, cutoff, order = args
+    method, scenario, target_idx, track_idx, cutoff, order = args
     truth = _simulate_one(scenario, key)
-    est, reported, ids, events = _method_estimates(tracker, truth.scans.measurements, truth.scans.valid)
-    confirmed = reported
+    _, (est, ok, events) = scan_method(method, truth.scans.measurements, truth.scans.valid, _record_estimates)
     g, scores = score_tracks(
-        truth.states[..., target_idx], truth.alive, est[..., track_idx], confirmed,
-        ids, cutoff=cutoff, order=order,
+        truth.states[..., target_idx], truth.alive, est.states[..., track_idx], est.mask,
+        est.ids, cutoff=cutoff, order=order,
     )
-    return {
+    sums = {
         "gospa": g.distance,
         "gospa_sq": g.distance**2,
         "localisation": g.localisation,
         "missed": g.missed,
         "false": g.false,
         "num_targets": jnp.sum(truth.alive, axis=1),
-        "num_tracks": jnp.sum(confirmed, axis=1),
+        "num_tracks": jnp.sum(est.mask, axis=1),
         "scores": scores,
         "scans_overflowed": jnp.sum(truth.scans.overflow),
-        "births_dropped": events,
+        "capacity_events": events[-1],
+        "scans_not_ok": jnp.sum(~ok),
     }
+    return sums, g.distance
 
 
-def tracker_monte_carlo(
-    tracker: Tracker,
+def _mc_block(common, value, key, start, valid):
+    """One block: the runs' sums (:func:`~jaxtrack.montecarlo._engine.masked_run_sums`, as
+    ``monte_carlo_map`` adds them) and every run's GOSPA per scan."""
+    args = common
+    keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(start + jnp.arange(valid.shape[0]))
+    sums, per_run = jax.vmap(_one_run, in_axes=(0, None))(keys, args)
+    return masked_run_sums(sums, valid), per_run, start
+
+
+def _mc_accumulate(totals, delta, start):
+    sums, buffer = totals
+    block_sums, per_run, _ = delta
+    sums = jax.tree_util.tree_map(jnp.add, sums, block_sums)
+    return sums, jax.lax.dynamic_update_slice_in_dim(buffer, per_run.astype(buffer.dtype), start, axis=0)
+
+
+def _summary(method, scenario, sums, per_run, R, cutoff, order, completed):
+    mean = sums["gospa"] / R
+    var = np.maximum(sums["gospa_sq"] / R - mean**2, 0.0) * R / (R - 1) if R > 1 else np.full_like(mean, np.nan)
+    half = 1.959963984540054 * np.sqrt(var / R)
+    scores = jax.tree.map(lambda s: np.asarray(s, float) / R, sums["scores"])
+    return MultiTargetMonteCarloResult(
+        gospa=mean,
+        gospa_interval=np.stack([mean - half, mean + half], axis=-1),
+        localisation=sums["localisation"] / R,
+        missed=sums["missed"] / R,
+        false=sums["false"] / R,
+        num_targets=sums["num_targets"] / R,
+        num_tracks=sums["num_tracks"] / R,
+        per_run_gospa=np.asarray(per_run)[:R],
+        scores=scores,
+        scans_overflowed=int(sums["scans_overflowed"]),
+        capacity_events=int(sums["capacity_events"]),
+        scans_not_ok=int(sums["scans_not_ok"]),
+        num_runs=R,
+        cutoff=float(cutoff),
+        order=float(order),
+        completed=completed,
+        method_name=type(method).__name__,
+    )
+
+
+def multitarget_monte_carlo(
+    method: AbstractMultiTargetFilter,
     scenario: Scenario,
     key,
     num_runs: int,
@@ -216,97 +278,107 @@ def tracker_monte_carlo(
     order: float = 2.0,
     block_size: int = 64,
     progress: bool = False,
-) -> TrackerMonteCarloResult:
-    """Monte Carlo of a tracker or a random-finite-set filter on a scenario: mean GOSPA per scan
-    with its parts, track counts.
+) -> MultiTargetMonteCarloResult:
+    """Monte Carlo of any multi-target method on a scenario: mean GOSPA per scan with its parts,
+    every run's GOSPA, track counts.
 
     Run ``i`` simulates ``scenario`` from ``fold_in(key, i)`` (exactly
-    ``simulate_scenario(scenario, fold_in(key, i))``), runs ``tracker`` over its scans
-    (:func:`run_tracker`, :func:`run_phd`, :func:`run_cphd` or :func:`run_pmbm`) and scores its
-    estimates' positions against the alive targets' (:func:`score_tracks`): a tracker's confirmed
-    tracks, a PMBM's or PMB's estimated tracks (with their ids), a GM-PHD's or GM-CPHD's
-    extracted estimates (unlabelled, so their track-level counts are not meaningful). Runs go through :func:`jaxtrack.montecarlo.monte_carlo_map` in blocks
-    of ``block_size`` vmapped runs (one compilation), summed in streaming form.
+    ``simulate_scenario(scenario, fold_in(key, i))``), runs ``method`` over its scans (the scan of
+    :func:`~jaxtrack.multitarget.run_multitarget`) and scores the positions of its
+    :meth:`~jaxtrack.multitarget.AbstractMultiTargetFilter.estimates` against the alive targets'
+    (:func:`score_tracks`): a tracker's confirmed tracks, a PMBM's or PMB's estimated tracks (with
+    their ids), a GM-PHD's or GM-CPHD's extracted estimates (unlabelled, so their track-level
+    counts are not meaningful). Runs go in blocks of ``block_size`` vmapped runs (one
+    compilation); the sums are added in block order (the statistics do not depend on how the runs
+    are split), every run's GOSPA per scan is written to a ``(R, T)`` store.
 
     **Arguments:**
 
-    - ``tracker``: a :class:`Tracker`, :class:`GMPHD`, :class:`GMCPHD`, :class:`PMBM` or
-      :class:`PMB` (its model may differ from the scenario's: a mismatched study);
-      ``scenario``: a :class:`Scenario`. Both models must declare their state layout
-      (the position components are scored).
+    - ``method``: any :class:`~jaxtrack.multitarget.AbstractMultiTargetFilter`
+      (:class:`~jaxtrack.multitarget.Tracker`, :class:`~jaxtrack.multitarget.GMPHD`,
+      :class:`~jaxtrack.multitarget.GMCPHD`, :class:`~jaxtrack.multitarget.PMB`,
+      :class:`~jaxtrack.multitarget.PMBM`; its model may differ from the scenario's: a mismatched
+      study); ``scenario``: a :class:`Scenario`. Both models must declare their state layout (the
+      position components are scored).
     - ``key``: PRNG key or int seed; ``num_runs``: ``R ≥ 2``.
     - ``cutoff``: GOSPA's ``c`` (position units, > 0); ``order``: ``p ≥ 1`` (default 2).
     - ``block_size``: runs per compiled block; ``progress``: a progress bar.
 
-    **Returns:** a :class:`TrackerMonteCarloResult`.
+    **Returns:** a :class:`MultiTargetMonteCarloResult` (``save``/``load``/``to_xarray`` like
+    :class:`~jaxtrack.montecarlo.MonteCarloResult`).
 
     **Warns:** :class:`CapacityWarning` when scans overflowed ``max_measurements`` or a capacity
-    of the method was too small (the counts are in the result: ``births_dropped`` counts track
-    births refused, Gaussian components left over by a PHD/CPHD reduction, and for a PMBM/PMB
-    also gated measurements or tracks its assignment had no room for and scans its associator
-    could not answer).
+    of the method was too small (counted in ``capacity_events``); ``RuntimeWarning`` when some scan
+    was not ``ok``.
+
+    **Interrupted** (Ctrl-C): raises :class:`~jaxtrack.montecarlo.MonteCarloInterrupted` (a
+    ``KeyboardInterrupt``) whose ``partial`` is the result of the blocks that had finished
+    (``completed=False``; None when fewer than 2 runs had), so an interrupted study keeps what it
+    computed: ``except KeyboardInterrupt as e: result = getattr(e, "partial", None)``.
     """
     _check_scenario(scenario)
-    from ._cphd import GMCPHD
-    from ._phd import GMPHD
-    from ._pmb import PMB
-    from ._pmbm import PMBM
-
-    if not isinstance(tracker, (Tracker, GMPHD, GMCPHD, PMBM, PMB)):
-        raise InputError(f"`tracker` must be a Tracker, GMPHD, GMCPHD, PMBM or PMB; got {type(tracker).__name__}.")
+    check_method(method)
     if not isinstance(num_runs, int) or num_runs < 2:
         raise InputError(f"`num_runs` must be an int >= 2 (for the interval); got {num_runs!r}.")
     if not float(cutoff) > 0:
         raise InputError(f"`cutoff` must be positive; got {cutoff}.")
     if not float(order) >= 1:
         raise InputError(f"`order` must be >= 1; got {order}.")
-    if tracker.model.meas_dim != scenario.model.meas_dim:
+    if not isinstance(block_size, int) or block_size < 1:
+        raise InputError(f"`block_size` must be a positive int; got {block_size!r}.")
+    if method.model.meas_dim != scenario.model.meas_dim:
         raise InputError(
-            f"the tracker's model measures {tracker.model.meas_dim} components, the scenario's "
+            f"the method's model measures {method.model.meas_dim} components, the scenario's "
             f"sensor {scenario.model.meas_dim}."
         )
     target_idx = _positions(scenario.model.state_layout, "scenario.model")
-    track_idx = _positions(tracker.model.state_layout, "tracker.model")
+    track_idx = _positions(method.model.state_layout, "method.model")
     if len(target_idx) != len(track_idx):
         raise InputError(
-            f"the scenario's targets have {len(target_idx)} position axes, the tracker's states "
+            f"the scenario's targets have {len(target_idx)} position axes, the method's states "
             f"{len(track_idx)}."
         )
-    args = (tracker, scenario, np.asarray(target_idx), np.asarray(track_idx), float(cutoff), float(order))
-    sums = monte_carlo_map(
-        _one_run, as_key(key), num_runs, args=args, block_size=block_size, progress=progress,
-        desc="tracker Monte Carlo",
-    )
+    key = as_key(key)
+    args = (method, scenario, np.asarray(target_idx), np.asarray(track_idx), float(cutoff), float(order))
+    refuse_traced("multitarget_monte_carlo", key, args)
+    block = block_size_for(num_runs, block_size)
+    shape = jax.eval_shape(lambda k: _one_run(k, args), jax.random.fold_in(key, 0))
+
+    def zero(sd):
+        return jnp.zeros(sd.shape, jnp.int32 if (sd.dtype == bool or jnp.issubdtype(sd.dtype, jnp.integer)) else sd.dtype)
+
+    padded = -(-num_runs // block) * block
+    totals = (jax.tree_util.tree_map(zero, shape[0]), jnp.zeros((padded,) + shape[1].shape, shape[1].dtype))
+    try:
+        sums, per_run = run_blocks(_mc_block, totals, common=args, key=key, num_runs=num_runs, block=block,
+                                   accumulate=_mc_accumulate, progress=progress, desc="multi-target Monte Carlo")
+    except MonteCarloInterrupted as stop:
+        if stop.totals is not None and stop.num_runs_done >= 2:
+            sums, per_run = stop.totals
+            stop.partial = _summary(method, scenario, sums, per_run, stop.num_runs_done, cutoff, order, False)
+        raise
+    result = _summary(method, scenario, sums, per_run, num_runs, cutoff, order, True)
     R = num_runs
-    mean = sums["gospa"] / R
-    var = np.maximum(sums["gospa_sq"] / R - mean**2, 0.0) * R / (R - 1)
-    half = 1.959963984540054 * np.sqrt(var / R)
-    scores = jax.tree.map(lambda s: np.asarray(s, float) / R, sums["scores"])
-    overflowed, dropped = int(sums["scans_overflowed"]), int(sums["births_dropped"])
-    if overflowed:
+    if result.scans_overflowed:
         warnings.warn(
-            f"{overflowed} scans over {R} runs held more than max_measurements="
+            f"{result.scans_overflowed} scans over {R} runs held more than max_measurements="
             f"{scenario.max_measurements} measurements (the excess was not tracked); raise it.",
             CapacityWarning, stacklevel=2,
         )
-    if dropped:
-        what = (f"track births over {R} runs were refused: the table's capacity ({tracker.capacity} slots) was too "
-                "small; raise `capacity`" if isinstance(tracker, Tracker) else
-                f"capacity events over {R} runs (components, tracks or assignment rows with no room, or scans the "
-                f"associator could not answer): a capacity of the {type(tracker).__name__} was too small; raise it")
-        warnings.warn(f"{dropped} {what}.", CapacityWarning, stacklevel=2)
-    return TrackerMonteCarloResult(
-        gospa=mean,
-        gospa_interval=np.stack([mean - half, mean + half], axis=-1),
-        localisation=sums["localisation"] / R,
-        missed=sums["missed"] / R,
-        false=sums["false"] / R,
-        num_targets=sums["num_targets"] / R,
-        num_tracks=sums["num_tracks"] / R,
-        scores=scores,
-        scans_overflowed=overflowed,
-        births_dropped=dropped,
-        num_runs=R,
-        cutoff=float(cutoff),
-        order=float(order),
-    )
+    if result.capacity_events:
+        warnings.warn(method.capacity_message(result.capacity_events) + f" (over {R} runs).", CapacityWarning,
+                      stacklevel=2)
+    if result.scans_not_ok:
+        warnings.warn(f"{result.scans_not_ok} scans over {R} runs were not ok (the {type(method).__name__} could not "
+                      "answer them with finite numbers within its capacities).", RuntimeWarning, stacklevel=2)
+    return result
+
+
+def tracker_monte_carlo(tracker, scenario, key, num_runs, **kwargs) -> MultiTargetMonteCarloResult:
+    """Deprecated: the former name of :func:`multitarget_monte_carlo` (same arguments, ``tracker``
+    being the method), removed in jaxtrack 0.3."""
+    from .._deprecation import REMOVED_IN
+
+    warnings.warn(f"`tracker_monte_carlo` is deprecated: use `multitarget_monte_carlo` (the same arguments); it will "
+                  f"be removed in jaxtrack {REMOVED_IN}.", DeprecationWarning, stacklevel=2)
+    return multitarget_monte_carlo(tracker, scenario, key, num_runs, **kwargs)

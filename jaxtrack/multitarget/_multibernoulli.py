@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import types
 import warnings
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -21,6 +21,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
+from ._base import AbstractMultiTargetFilter, Estimates, scan_method, scan_ok
 from ._phd import _check_scans, _common_fields, _in_slots, _initial_fields, _pair_likelihoods, _scalar
 from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
@@ -44,7 +45,9 @@ class PMBMState(eqx.Module):
       ``()`` int: new tracks that found no free slot, over the run; ``poisson_num_dropped``,
       ``poisson_dropped_weight``: Poisson components (and weight) left over by the reduction;
       ``assignment_overflow`` ``()`` int: gated measurements and tracks the PMBM's ranked
-      assignment had no room for (``assignment_rows``, ``assignment_tracks``), over the run.
+      assignment had no room for (``assignment_rows``, ``assignment_tracks``), over the run;
+      ``association_failures`` ``()`` int: scans the PMB's associator could not answer (its
+      ``ok`` False, e.g. a gating cluster beyond exact JPDA's caps), over the run.
     """
 
     poisson_weights: Float[Array, " J"]
@@ -67,6 +70,7 @@ class PMBMState(eqx.Module):
     poisson_num_dropped: Int[Array, ""]
     poisson_dropped_weight: Float[Array, ""]
     assignment_overflow: Int[Array, ""]
+    association_failures: Int[Array, ""]
 
     @property
     def num_hypotheses(self) -> Int[Array, ""]:
@@ -93,7 +97,8 @@ class PMBMStepInfo(NamedTuple):
     term ``−Σ P_D w``; G18 eq. (25)); ``association_ok`` ``()`` bool: the PMB's associator answered
     within its capacity (always True for the PMBM); ``assignment_rows``, ``assignment_tracks``
     ``()`` int: the gated measurements and the tracks they reach, the size the PMBM's ranked
-    assignment needed this scan (0 for the PMB)."""
+    assignment needed this scan (0 for the PMB); ``ok`` ``()`` bool: the associator answered and the
+    valid measurements and the log-likelihood are finite (set by the filter's ``step``)."""
 
     num_hypotheses: Int[Array, ""]
     num_tracks: Int[Array, ""]
@@ -102,6 +107,7 @@ class PMBMStepInfo(NamedTuple):
     association_ok: Bool[Array, ""]
     assignment_rows: Int[Array, ""]
     assignment_tracks: Int[Array, ""]
+    ok: Bool[Array, ""] | bool = True
 
 
 def _hypothesis_weights(state):
@@ -136,7 +142,9 @@ def _mb_fields(filter, model, *, prob_survival, prob_detect, clutter_density, bi
     return {
         "filter": base["filter"], "model": base["model"], "prob_survival": base["prob_survival"],
         "prob_detect": base["prob_detect"],
-        "clutter_density": _scalar("clutter_density", clutter_density, low=0.0),
+        # κ = 0 would make a measurement no Poisson component or track reaches impossible (its new
+        # track's weight log(e + κ) = −inf, an infeasible assignment): refused, as the PMB always did.
+        "clutter_density": _scalar("clutter_density", clutter_density, low=0.0, open_low=True),
         "birth_weights": base["birth_weights"], "birth_means": base["birth_means"], "birth_covs": base["birth_covs"],
         **initial,
         "poisson_capacity": base["capacity"], "max_tracks": _positive_int("max_tracks", max_tracks),
@@ -177,7 +185,7 @@ def _init_state(f, H: int) -> PMBMState:
         hypothesis_active=jnp.arange(H) == 0,
         step=jnp.zeros((), i32), next_id=jnp.zeros((), i32), num_dropped_tracks=jnp.zeros((), i32),
         poisson_num_dropped=jnp.zeros((), i32), poisson_dropped_weight=jnp.zeros((), dtype),
-        assignment_overflow=jnp.zeros((), i32),
+        assignment_overflow=jnp.zeros((), i32), association_failures=jnp.zeros((), i32),
     )
 
 
@@ -359,7 +367,7 @@ def _finish(f, state, *, existence, means, covs, local_active, table, log_w, hyp
 
 
 
-class AbstractMultiBernoulliFilter(eqx.Module):
+class AbstractMultiBernoulliFilter(AbstractMultiTargetFilter):
     """What the PMBM (:class:`~jaxtrack.multitarget.PMBM`) and the PMB
     (:class:`~jaxtrack.multitarget.PMB`) share: the configuration fields (documented on each) and
     every step but the update, which each implements (ranked hypotheses, or association marginals)."""
@@ -383,6 +391,7 @@ class AbstractMultiBernoulliFilter(eqx.Module):
     poisson_capacity: int = eqx.field(static=True)
     max_tracks: int = eqx.field(static=True)
     max_hypotheses: int = eqx.field(static=True)
+    labelled: ClassVar[bool] = True
 
     def init(self) -> PMBMState:
         """The prior: the initial Poisson intensity, no tracks, one global hypothesis."""
@@ -403,13 +412,31 @@ class AbstractMultiBernoulliFilter(eqx.Module):
         ``(M, m)`` in the sensor's units (padding may hold anything); ``valid`` ``(M,)`` bool.
         """
         state, info = self.update(_maybe_predict(self, state), measurements, valid)
-        return eqx.tree_at(lambda s: s.step, state, state.step + 1), info
+        answered = jnp.asarray(info.association_ok, bool)
+        ok = answered & scan_ok(jnp.asarray(measurements), jnp.asarray(valid, bool)) & jnp.isfinite(info.log_likelihood)
+        state = eqx.tree_at(lambda s: (s.step, s.association_failures), state,
+                            (state.step + 1, state.association_failures + (~answered).astype(jnp.int32)))
+        return state, info._replace(ok=ok)
 
-    def estimates(self, state: PMBMState):
+    def estimates(self, state: PMBMState) -> Estimates:
         """The tracks of the most likely global hypothesis with ``r >`` ``estimation_threshold``
-        (G18 Sec. VI, estimator 1; for the PMB, its one hypothesis). **Returns:** ``(states (N, n),
-        mask (N,), track_id (N,))`` by track slot."""
-        return _estimates(self, state)
+        (G18 Sec. VI, estimator 1; for the PMB, its one hypothesis). **Returns:**
+        :class:`~jaxtrack.multitarget.Estimates` ``(states (N, n), mask (N,), track_id (N,))`` by
+        track slot."""
+        return Estimates(*_estimates(self, state))
+
+    def capacity_events(self, state: PMBMState) -> Int[Array, ""]:
+        """New tracks with no free slot, Poisson components left over, gated measurements or tracks
+        the ranked assignment had no room for, and scans the associator could not answer, so far."""
+        return (state.num_dropped_tracks + state.poisson_num_dropped + state.assignment_overflow
+                + state.association_failures)
+
+    def capacity_message(self, events: int) -> str:
+        return (f"{events} capacity events in the {type(self).__name__} filter: new tracks with no free slot "
+                f"(max_tracks={self.max_tracks}), Poisson components left over (poisson_capacity="
+                f"{self.poisson_capacity}), gated measurements or tracks the ranked assignment had no room for "
+                "(assignment_rows, assignment_tracks) or scans the associator could not answer (its cluster "
+                "capacity; LoopyBP has none); raise them")
 
 class PMBMResult(eqx.Module):
     """A PMBM or PMB run over ``T`` scans.
@@ -419,7 +446,8 @@ class PMBMResult(eqx.Module):
     ``num_tracks`` ``(T,)``; ``expected_cardinality`` ``(T,)``; ``log_likelihood`` ``(T,)``
     (:class:`PMBMStepInfo`); ``num_dropped_tracks`` ``(T,)`` per scan; ``association_ok``
     ``(T,)`` (the PMB's associator within its capacity); ``assignment_rows``,
-    ``assignment_tracks`` ``(T,)`` (the PMBM's ranked-assignment sizes needed); ``overflow`` ``()``: a new
+    ``assignment_tracks`` ``(T,)`` (the PMBM's ranked-assignment sizes needed); ``ok`` ``(T,)``
+    (:class:`PMBMStepInfo`); ``overflow`` ``()``: a new
     track found no slot or the Poisson reduction left components over; ``final``: the last
     :class:`PMBMState`.
     """
@@ -435,20 +463,20 @@ class PMBMResult(eqx.Module):
     association_ok: Bool[Array, " T"]
     assignment_rows: Int[Array, " T"]
     assignment_tracks: Int[Array, " T"]
+    ok: Bool[Array, " T"]
     overflow: Bool[Array, ""]
     final: PMBMState
 
 
-@eqx.filter_jit
-def _run(mb, measurements, valid):
-    def body(state, scan):
-        state, info = mb.step(state, *scan)
-        states, mask, ids = mb.estimates(state)
-        return state, (states, mask, ids, info.num_hypotheses, info.num_tracks, state.expected_cardinality(),
-                       info.log_likelihood, info.num_dropped_tracks, info.association_ok,
-                       info.assignment_rows, info.assignment_tracks)
+def _record_mb(mb, state, info):
+    states, mask, ids = mb.estimates(state)
+    return (states, mask, ids, info.num_hypotheses, info.num_tracks, state.expected_cardinality(),
+            info.log_likelihood, info.num_dropped_tracks, info.association_ok, info.assignment_rows,
+            info.assignment_tracks, info.ok)
 
-    final, outs = jax.lax.scan(body, mb.init(), (measurements, valid))
+
+def _run(mb, measurements, valid):
+    final, outs = scan_method(mb, measurements, valid, _record_mb)
     return PMBMResult(*outs, final.overflow, final)
 
 

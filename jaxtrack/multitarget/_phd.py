@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -58,6 +58,7 @@ from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
 from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
+from ._base import AbstractMultiTargetFilter, Estimates, check_scans, scan_method, scan_ok, warn_capacity, warn_not_ok
 from ._reduction import _reduce_mixture
 from ._scenario import CapacityWarning, _positive_int
 
@@ -103,7 +104,8 @@ class GMPHDStepInfo(NamedTuple):
     ``updated_cardinality`` ``()``: ``Σ w`` of the updated mixture before reduction;
     ``log_normalizer`` ``(M,)``: ``log(κ + P_D Σ_i w_i q_ij)`` per measurement (0 for padding);
     ``num_dropped`` ``()`` int, ``dropped_weight`` ``()``: left over by this scan's reduction;
-    ``num_pruned`` ``()`` int: components pruned below ``T``.
+    ``num_pruned`` ``()`` int: components pruned below ``T``; ``ok`` ``()`` bool: the scan's valid
+    measurements and the updated mixture are finite (a NaN ``P_D`` or measurement makes it False).
     """
 
     updated_cardinality: Float[Array, ""]
@@ -111,6 +113,7 @@ class GMPHDStepInfo(NamedTuple):
     num_dropped: Int[Array, ""]
     dropped_weight: Float[Array, ""]
     num_pruned: Int[Array, ""]
+    ok: Bool[Array, ""]
 
 
 def _scalar(name, value, *, low, high=None, open_low=False):
@@ -263,16 +266,8 @@ def _updated_layout(w_miss, miss_active, w_det, pair, means, covs, cond):
 
 
 def _check_scans(measurements, valid, meas_dim):
-    """``(measurements, valid)`` as arrays, or :class:`~jaxtrack.InputError` naming the bad one."""
-    measurements = jnp.asarray(measurements)
-    valid = jnp.asarray(valid)
-    if measurements.ndim != 3:
-        raise InputError(f"`measurements` must be (T, M, m); got shape {measurements.shape}.")
-    if measurements.shape[-1] != meas_dim:
-        raise InputError(f"`measurements` have {measurements.shape[-1]} components; the model measures {meas_dim}.")
-    if valid.shape != measurements.shape[:2] or valid.dtype != bool:
-        raise InputError(f"`valid` must be boolean (T, M) = {measurements.shape[:2]}; got {valid.dtype} {valid.shape}.")
-    return measurements, valid
+    """``(measurements, valid)`` checked (:func:`._base.check_scans`)."""
+    return check_scans(measurements, valid, meas_dim)
 
 
 def _warn_capacity(what, capacity, result):
@@ -288,7 +283,7 @@ def _warn_capacity(what, capacity, result):
         )
 
 
-class GMPHD(eqx.Module):
+class GMPHD(AbstractMultiTargetFilter):
     r"""The GM-PHD filter of Vo & Ma (2006) with a fixed component budget ``J_max``.
 
     **Arguments:**
@@ -299,7 +294,8 @@ class GMPHD(eqx.Module):
     - ``model``: the single-target state-space model (motion and sensor) every target follows.
     - ``prob_survival``: ``P_S`` in ``(0, 1]``; ``prob_detect``: ``P_D`` in ``(0, 1]``.
     - ``clutter_density``: ``κ``, clutter points per unit measurement-space volume per scan
-      (e.g. per m² for positions), ``>= 0``.
+      (e.g. per m² for positions), ``> 0`` and finite (0 would make a measurement that no
+      component reaches 0/0: use a small positive value for an almost clutter-free sensor).
     - ``birth_weights`` ``(B,)`` (expected births per scan, each ``>= 0``), ``birth_means``
       ``(B, n)``, ``birth_covs`` ``(B, n, n)``: the birth intensity ``γ_k``.
     - ``capacity``: ``J_max``, the number of mixture slots after reduction (static).
@@ -363,6 +359,7 @@ class GMPHD(eqx.Module):
     gate: Float[Array, ""]
     reduction: str = eqx.field(static=True)
     max_estimates: int = eqx.field(static=True)
+    labelled: ClassVar[bool] = False
 
     def __init__(
         self,
@@ -395,7 +392,9 @@ class GMPHD(eqx.Module):
         ).items():
             setattr(self, name, value)
         self.extraction_threshold = _scalar("extraction_threshold", extraction_threshold, low=0.0)
-        self.clutter_density = _scalar("clutter_density", clutter_density, low=0.0)
+        # κ = 0 leaves a measurement no component reaches as 0/0 (its weight is dropped in silence):
+        # refused; a clutter-free model is a small positive κ.
+        self.clutter_density = _scalar("clutter_density", clutter_density, low=0.0, open_low=True)
         self.reduction = reduction
         for name, value in _initial_fields(initial_weights, initial_means, initial_covs, model.state_dim,
                                            self.capacity, "capacity").items():
@@ -485,17 +484,32 @@ class GMPHD(eqx.Module):
         w, m, P, active, n_drop, w_drop, n_pruned = self.reduce(w, m, P, active)
         new = GMPHDMixture(w, m, P, active, mixture.step + 1, mixture.num_dropped + n_drop,
                            mixture.dropped_weight + w_drop)
-        return new, GMPHDStepInfo(updated_card, log_norm, n_drop, w_drop, n_pruned)
+        ok = scan_ok(measurements, valid) & _mixture_finite(new)
+        return new, GMPHDStepInfo(updated_card, log_norm, n_drop, w_drop, n_pruned, ok)
 
-    def estimates(self, mixture: GMPHDMixture):
+    def estimates(self, mixture: GMPHDMixture) -> Estimates:
         r"""Multi-target state extraction (Vo & Ma 2006, Table III).
 
         Every component with ``w_i >`` ``extraction_threshold`` gives ``round(w_i)`` copies of its
         mean (``round`` half up, ``⌊w + 1/2⌋``), padded to ``max_estimates`` rows.
 
-        **Returns:** ``(states, mask, count)``: ``(E, n)``, ``(E,)`` bool and the number of
-        estimates ``()`` int before padding (more than ``E`` means some were not stored).
+        **Returns:** :class:`~jaxtrack.multitarget.Estimates` ``(states (E, n), mask (E,), ids (E,))``;
+        the GM-PHD has no labels, so ``ids`` is the row index (−1 where masked).
         """
+        states, mask, _ = self._extract(mixture)
+        return Estimates(states, mask, jnp.where(mask, jnp.arange(self.max_estimates, dtype=jnp.int32), -1))
+
+    def capacity_events(self, mixture: GMPHDMixture) -> Int[Array, ""]:
+        """Components the reduction left over for want of slots, summed over the scans so far."""
+        return mixture.num_dropped
+
+    def capacity_message(self, events: int) -> str:
+        return (f"the GM-PHD mixture's capacity ({self.capacity} components) was too small: {events} components "
+                "were left over by the reduction; raise `capacity`")
+
+    def _extract(self, mixture: GMPHDMixture):
+        """Table III: ``(states (E, n), mask (E,), count ())``, ``count`` the number of estimates
+        before padding (more than ``E`` means some were not stored)."""
         w = jnp.where(mixture.active, mixture.weights, 0.0)
         copies = jnp.where(w > self.extraction_threshold.astype(w.dtype), jnp.floor(w + 0.5), 0.0).astype(jnp.int32)
         ends = jnp.cumsum(copies)
@@ -515,7 +529,7 @@ class PHDResult(eqx.Module):
     scan; ``cardinality`` ``(T,)``: ``Σ w`` after reduction; ``updated_cardinality`` ``(T,)``: before
     it; ``estimates`` ``(T, E, n)``, ``estimate_mask`` ``(T, E)``, ``num_estimates`` ``(T,)``
     (Table III); ``num_dropped`` ``(T,)``, ``dropped_weight`` ``(T,)``: left over per scan for
-    want of slots; ``overflow`` ``()``: some scan left components over; ``final``: the last
+    want of slots; ``ok`` ``(T,)``: the scan's step was finite (:class:`GMPHDStepInfo`); ``overflow`` ``()``: some scan left components over; ``final``: the last
     :class:`GMPHDMixture`.
     """
 
@@ -530,6 +544,7 @@ class PHDResult(eqx.Module):
     num_estimates: Int[Array, " T"]
     num_dropped: Int[Array, " T"]
     dropped_weight: Float[Array, " T"]
+    ok: Bool[Array, " T"]
     overflow: Bool[Array, ""]
     final: GMPHDMixture
 
@@ -539,16 +554,20 @@ class PHDResult(eqx.Module):
         return self.num_dropped > 0
 
 
-@eqx.filter_jit
-def _run_phd(phd, measurements, valid):
-    def body(mixture, scan):
-        mixture, info = phd.step(mixture, *scan)
-        states, mask, count = phd.estimates(mixture)
-        out = (mixture.weights, mixture.means, mixture.covs, mixture.active, mixture.cardinality,
-               info.updated_cardinality, states, mask, count, info.num_dropped, info.dropped_weight)
-        return mixture, out
+def _mixture_finite(mixture: GMPHDMixture) -> Bool[Array, ""]:
+    """The active components' weights and means are finite."""
+    a = mixture.active
+    return jnp.all(~a | jnp.isfinite(mixture.weights)) & jnp.all(~a[:, None] | jnp.isfinite(mixture.means))
 
-    final, outs = jax.lax.scan(body, phd.init(), (measurements, valid))
+
+def _record_phd(phd, mixture, info):
+    states, mask, count = phd._extract(mixture)
+    return (mixture.weights, mixture.means, mixture.covs, mixture.active, mixture.cardinality,
+            info.updated_cardinality, states, mask, count, info.num_dropped, info.dropped_weight, info.ok)
+
+
+def _run_phd(phd, measurements, valid):
+    final, outs = scan_method(phd, measurements, valid, _record_phd)
     return PHDResult(*outs, final.overflow, final)
 
 
@@ -572,5 +591,6 @@ def run_phd(phd: GMPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: bool
     measurements, valid = _check_scans(measurements, valid, phd.model.meas_dim)
     result = _run_phd(phd, measurements, valid)
     if warn:
-        _warn_capacity("GM-PHD", phd.capacity, result)
+        warn_capacity(phd, result.final.num_dropped)
+        warn_not_ok(phd, result.ok)
     return result

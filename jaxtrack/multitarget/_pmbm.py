@@ -107,7 +107,8 @@ class PMBM(AbstractMultiBernoulliFilter):
     - ``prob_survival``: ``P_S`` in ``(0, 1]``; ``prob_detect``: ``P_D`` in ``(0, 1)`` (1 is
       refused: a track with ``r = 1`` could not be missed, and the ranked assignment works on
       likelihood ratios to the miss).
-    - ``clutter_density``: ``κ``, clutter points per unit measurement-space volume per scan.
+    - ``clutter_density``: ``κ``, clutter points per unit measurement-space volume per scan, ``> 0``
+      and finite (0 would make a measurement that no track or Poisson component reaches impossible).
     - ``birth_weights`` ``(B,)``, ``birth_means`` ``(B, n)``, ``birth_covs`` ``(B, n, n)``: the
       Poisson birth intensity added at every prediction.
     - ``initial_weights``, ``initial_means``, ``initial_covs``: the Poisson intensity the first

@@ -33,8 +33,7 @@ counted in ``TrackTable.num_dropped_births`` (and flagged by ``overflow``), neve
 
 from __future__ import annotations
 
-import warnings
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
@@ -48,7 +47,7 @@ from ..association._pda_update import pda_update
 from ..association._types import AbstractAssociator, Association
 from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
-from ._scenario import CapacityWarning
+from ._base import AbstractMultiTargetFilter, Estimates, check_scans, scan_method, scan_ok, warn_capacity, warn_not_ok
 
 EMPTY = 0
 """Track status of a free slot in :attr:`TrackTable.status` (a deleted track's slot becomes it)."""
@@ -74,7 +73,9 @@ class TrackTable(eqx.Module):
     - ``track_id`` ``(N,)`` int: a unique id per track (−1 in empty slots); ``born_at`` ``(N,)``
       int: the scan index of its first measurement.
     - ``next_id`` ``()`` int: the next id to give; ``step`` ``()`` int: the next scan's index.
-    - ``num_dropped_births`` ``()`` int: births refused so far for want of a free slot.
+    - ``num_dropped_births`` ``()`` int: births refused so far for want of a free slot;
+      ``num_association_failures`` ``()`` int: scans whose association method could not answer
+      (``Association.ok`` False: a gating cluster beyond exact JPDA's caps, a non-finite weight).
     """
 
     mean: Float[Array, "N n"]
@@ -88,6 +89,7 @@ class TrackTable(eqx.Module):
     next_id: Int[Array, ""]
     step: Int[Array, ""]
     num_dropped_births: Int[Array, ""]
+    num_association_failures: Int[Array, ""]
 
     @property
     def live(self) -> Bool[Array, " N"]:
@@ -142,6 +144,51 @@ class OnePointInitiator(eqx.Module):
         if is_concrete(self.existence) and not 0.0 < float(self.existence) <= 1.0:
             raise InputError(f"`existence` must lie in (0, 1]; got {float(self.existence)}.")
 
+    def moments(self, tracker_filter, model, z, k):
+        """The new track's ``(mean (n,), cov (n, n))`` at measurement ``z`` ``(m,)`` of scan ``k``."""
+        init_filter = tracker_filter if self.filter is None else self.filter
+        z = jnp.where(jnp.isfinite(z), z, 0.0)  # padded rows: never used, kept finite
+        post = init_filter.update(model, self.prior_mean, self.prior_cov, z, jnp.ones(z.shape, bool), k)
+        return post.mean, post.cov
+
+    def initiate(self, tracker_filter, model, table: "TrackTable", keep, measurements, new, k, first_status):
+        """Start a track at every measurement in ``new`` ``(M,)`` (valid, claimed by no track), in the
+        free slots (``~keep``), in ascending order of both; births beyond the free slots are counted.
+
+        ``table`` holds the managed tracks (their ``mean``/``cov``/... where ``keep``).
+        **Returns:** ``(table, born (M,), num_born (), dropped ())``."""
+        dtype = table.mean.dtype
+        born_mean, born_cov = jax.vmap(lambda z: self.moments(tracker_filter, model, z, k))(measurements)
+        free = ~keep
+        N, M = keep.shape[0], measurements.shape[0]
+        free_slots = jnp.nonzero(free, size=N, fill_value=N)[0]  # free slot indices, ascending
+        new_meas = jnp.nonzero(new, size=M, fill_value=M)[0]  # new measurements, ascending
+        num_new = jnp.sum(new)
+        num_born = jnp.minimum(num_new, jnp.sum(free))
+        # Slot free_slots[q] receives measurement new_meas[q] for q < num_born.
+        q = jnp.arange(N)
+        meas_of_q = jnp.where(q < num_born, new_meas[jnp.minimum(q, M - 1)], M).astype(jnp.int32)
+        slot_meas = jnp.full((N + 1,), M, jnp.int32).at[free_slots].set(meas_of_q)[:N]
+        births = slot_meas < M
+        take = jnp.minimum(slot_meas, M - 1)
+        slot_rank = jnp.cumsum(births) - 1
+        table = TrackTable(
+            mean=jnp.where(births[:, None], born_mean[take], table.mean),
+            cov=jnp.where(births[:, None, None], born_cov[take], table.cov),
+            status=jnp.where(births, first_status, table.status).astype(jnp.int32),
+            existence=jnp.where(births, self.existence.astype(dtype), table.existence),
+            hits=jnp.where(births, 1, table.hits).astype(jnp.int32),
+            misses=jnp.where(births, 0, table.misses).astype(jnp.int32),
+            track_id=jnp.where(births, table.next_id + slot_rank, table.track_id).astype(jnp.int32),
+            born_at=jnp.where(births, k, table.born_at).astype(jnp.int32),
+            next_id=table.next_id + num_born.astype(jnp.int32),
+            step=table.step,
+            num_dropped_births=table.num_dropped_births + (num_new - num_born).astype(jnp.int32),
+            num_association_failures=table.num_association_failures,
+        )
+        born = jnp.zeros((M + 1,), bool).at[slot_meas].set(births, mode="drop")[:M]
+        return table, born, num_born, num_new - num_born
+
 
 class TrackManagement(eqx.Module):
     """When a track is confirmed and when it is deleted (M-of-N logic; existence thresholds).
@@ -179,6 +226,34 @@ class TrackManagement(eqx.Module):
             if value is not None and not 0.0 <= value <= 1.0:
                 raise InputError(f"`{name}` must lie in [0, 1]; got {value}.")
 
+    @property
+    def first_status(self) -> int:
+        """A new track's status: confirmed at once when ``confirm_hits = 1``, else tentative."""
+        return CONFIRMED if self.confirm_hits == 1 else TENTATIVE
+
+    def manage(self, table: "TrackTable", hit, existence, k):
+        """Confirm and delete after scan ``k``: ``hit`` ``(N,)`` the tracks hit in it, ``existence``
+        ``(N,)`` their posterior existence. **Returns:** ``(status (N,), hits (N,), misses (N,),
+        keep (N,))`` with the deleted slots ``EMPTY``."""
+        live = table.live
+        window_mask = (1 << self.confirm_window) - 1
+        hits = ((table.hits << 1) | hit.astype(jnp.int32)) & window_mask
+        misses = jnp.where(hit, 0, table.misses + 1)
+        num_hits = _popcount(hits, self.confirm_window)
+        age = k - table.born_at + 1  # scans seen, this one included
+        tentative = table.status == TENTATIVE
+        confirm = tentative & (num_hits >= self.confirm_hits)
+        if self.confirm_existence is not None:
+            confirm = confirm | (tentative & (existence >= self.confirm_existence))
+        # A tentative track that cannot reach M hits within its first N scans is deleted.
+        hopeless = tentative & ~confirm & (num_hits + (self.confirm_window - age) < self.confirm_hits)
+        delete = live & ((misses >= self.delete_after_misses) | hopeless)
+        if self.delete_existence is not None:
+            delete = delete | (live & (existence < self.delete_existence))
+        status = jnp.where(confirm, CONFIRMED, table.status)
+        status = jnp.where(delete, EMPTY, status)
+        return status, hits, misses, status != EMPTY
+
 
 class IntegratedExistence(eqx.Module):
     """JIPDA's existence probability (Mušicki & Evans 2004, "Joint integrated probabilistic data
@@ -195,6 +270,23 @@ class IntegratedExistence(eqx.Module):
         if is_concrete(self.prob_survival) and not 0.0 < float(self.prob_survival) <= 1.0:
             raise InputError(f"`prob_survival` must lie in (0, 1]; got {float(self.prob_survival)}.")
 
+    def predict(self, existence):
+        """``r_{k|k-1} = P_S r_{k-1|k-1}`` (Markov chain 1)."""
+        return self.prob_survival * existence
+
+    def posterior(self, existence_pred, beta, detect):
+        """The posterior existence and the state-mixture weights (Mušicki & Evans 2004, eqs. (27)-(31)):
+        ``beta[:, 0]`` mixes "exists, not detected" and "does not exist"; the state is conditioned
+        on existence. ``detect`` is ``P_D P_G``. **Returns:** ``(existence (N,), weights (N, 1 + M))``."""
+        undetected = existence_pred * (1.0 - detect) / (1.0 - existence_pred * detect)
+        exist_post = beta[:, 0] * undetected + jnp.sum(beta[:, 1:], axis=1)
+        # A sum of probabilities can round to just above 1 (with P_S = 1 and r → 1), which the
+        # next scan's log_likelihood_ratios rejects (NaN under jit): keep it a probability.
+        exist_post = jnp.minimum(exist_post, 1.0)
+        safe = jnp.where(exist_post > 0, exist_post, 1.0)
+        weights = jnp.concatenate([(beta[:, :1] * undetected[:, None]), beta[:, 1:]], axis=1)
+        return exist_post, weights / safe[:, None]
+
 
 class TrackerStepInfo(NamedTuple):
     """What one tracker step computed besides the new table.
@@ -204,7 +296,10 @@ class TrackerStepInfo(NamedTuple):
     in this scan; ``claimed`` ``(M,)``: measurements some track claimed; ``born`` ``(M,)``:
     measurements that started a track; ``births_dropped`` ``()``: births refused in this scan;
     ``log_likelihood`` ``()``: the scan's log-likelihood given the predicted tracks, nats (log of
-    the scan's density in inverse measurement units; :meth:`Tracker.step` derives it).
+    the scan's density in inverse measurement units; :meth:`Tracker.step` derives it); ``ok`` ``()``:
+    the association answered (``Association.ok``), the valid measurements, ``P_D`` in (0, 1],
+    ``λ`` (finite, > 0) and the live tracks' moments are finite: False where a number would be
+    silently wrong (a traced NaN ``P_D``, a cluster beyond exact JPDA's caps).
     """
 
     association: Association
@@ -214,9 +309,10 @@ class TrackerStepInfo(NamedTuple):
     born: Bool[Array, " M"]
     births_dropped: Int[Array, ""]
     log_likelihood: Float[Array, ""]
+    ok: Bool[Array, ""]
 
 
-class Tracker(eqx.Module):
+class Tracker(AbstractMultiTargetFilter):
     """A multi-target tracker: one step function over a :class:`TrackTable`.
 
     The association method is a strategy: ``GNN()`` gives the GNN tracker, ``JPDA()`` the JPDA
@@ -255,6 +351,7 @@ class Tracker(eqx.Module):
     capacity: int = eqx.field(static=True)
     existence: IntegratedExistence | None
     clutter_volume: Float[Array, ""] | None
+    labelled: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -296,9 +393,9 @@ class Tracker(eqx.Module):
         self.clutter_density = jnp.asarray(clutter_density, float)
         if is_concrete(self.prob_detect) and not 0.0 < float(self.prob_detect) <= 1.0:
             raise InputError(f"`prob_detect` must lie in (0, 1]; got {float(self.prob_detect)}.")
-        if is_concrete(self.clutter_density) and not float(self.clutter_density) > 0.0:
+        if is_concrete(self.clutter_density) and not 0.0 < float(self.clutter_density) < np.inf:
             raise InputError(
-                f"`clutter_density` must be positive (per unit measurement volume); got "
+                f"`clutter_density` must be finite and positive (per unit measurement volume); got "
                 f"{float(self.clutter_density)}."
             )
         self.prob_gate = float(prob_gate)
@@ -332,7 +429,25 @@ class Tracker(eqx.Module):
             next_id=jnp.zeros((), jnp.int32),
             step=jnp.zeros((), jnp.int32),
             num_dropped_births=jnp.zeros((), jnp.int32),
+            num_association_failures=jnp.zeros((), jnp.int32),
         )
+
+    def estimates(self, table: TrackTable) -> Estimates:
+        """The confirmed tracks: :class:`~jaxtrack.multitarget.Estimates` ``(mean (N, n), confirmed
+        (N,), track_id (N,))`` by slot (unconfirmed slots masked: means 0, ids −1)."""
+        confirmed = table.confirmed
+        return Estimates(jnp.where(confirmed[:, None], table.mean, 0.0), confirmed,
+                         jnp.where(confirmed, table.track_id, -1))
+
+    def capacity_events(self, table: TrackTable) -> Int[Array, ""]:
+        """Births refused for want of a free slot and scans the association could not answer, so far."""
+        return table.num_dropped_births + table.num_association_failures
+
+    def capacity_message(self, events: int) -> str:
+        return (f"{events} capacity events in the tracker: track births refused because the table's capacity "
+                f"({self.capacity} slots) was full (raise `capacity`), or scans its {type(self.association).__name__} "
+                "association could not answer (a gating cluster beyond exact JPDA's caps: raise max_cluster_* or "
+                "use LoopyBP)")
 
     def step(
         self, table: TrackTable, measurements: Float[Array, "M m"], valid: Bool[Array, " M"]
@@ -393,143 +508,77 @@ class Tracker(eqx.Module):
         small initial existence keeps their weight small). ``clutter_volume=None`` leaves out
         ``−λV``; without it the log-likelihood grows without bound in ``λ``.
         """
-        k = table.step
-        live = table.live
-        dtype = table.mean.dtype
-        measurements = jnp.asarray(measurements, dtype)
-        valid = jnp.asarray(valid, bool)
-
-        # 1. Predict (a track born in the previous scan sits at that scan: predicted like the rest).
-        # Empty slots hold the initiator's prior, so their prediction is finite and then discarded.
-        pred_mean, pred_cov = jax.vmap(lambda x, P: self.filter.predict(self.model, x, P, k))(
-            table.mean, table.cov
-        )
-        existence_pred = table.existence
-        if self.existence is not None:
-            existence_pred = self.existence.prob_survival * table.existence
-
-        # 2.-3. Hypothesise and associate.
+        k, live, dtype = table.step, table.live, table.mean.dtype
+        measurements, valid = jnp.asarray(measurements, dtype), jnp.asarray(valid, bool)
+        pred_mean, pred_cov, existence_pred = self._predict(table)
         loglik, nis, conditioned = jax.vmap(
             lambda x, P: measurement_likelihoods(self.filter, self.model, x, P, measurements, valid, k)
         )(pred_mean, pred_cov)
+        log_weights = self._log_weights(loglik, nis, live, valid, existence_pred)
+        association = self.association(log_weights, live)
+        beta = association.association_probabilities
+        if self.existence is not None:
+            exist_post, weights = self.existence.posterior(existence_pred, beta, self.prob_detect * self.prob_gate)
+        else:
+            exist_post, weights = jnp.where(live, 1.0, 0.0).astype(dtype), beta
+        post_mean, post_cov = jax.vmap(pda_update)(conditioned, weights, pred_mean, pred_cov)
+        # A hit: some detection more probable than the miss (Stone Soup's rule).
+        hit = live & jnp.any(beta[:, 1:] > beta[:, :1], axis=1)
+        claimed = jnp.any(live[:, None] & (beta[:, 1:] > beta[:, :1]), axis=0) & valid
+        status, hits, misses, keep = self.management.manage(table, hit, exist_post, k)
+        managed = TrackTable(
+            mean=jnp.where(keep[:, None], post_mean, self.initiator.prior_mean.astype(dtype)),
+            cov=jnp.where(keep[:, None, None], post_cov, self.initiator.prior_cov.astype(dtype)),
+            status=status, existence=jnp.where(keep, exist_post, 0.0), hits=jnp.where(keep, hits, 0),
+            misses=jnp.where(keep, misses, 0), track_id=jnp.where(keep, table.track_id, -1),
+            born_at=jnp.where(keep, table.born_at, -1), next_id=table.next_id, step=k + 1,
+            num_dropped_births=table.num_dropped_births,
+            num_association_failures=table.num_association_failures + (~association.ok).astype(jnp.int32),
+        )
+        new_table, born, _, dropped = self.initiator.initiate(
+            self.filter, self.model, managed, keep, measurements, valid & ~claimed, k, self.management.first_status)
+        log_likelihood = self._log_likelihood(valid, association, dtype)
+        ok = association.ok & scan_ok(measurements, valid) & self._parameters_ok() & jnp.all(
+            ~live[:, None] | jnp.isfinite(post_mean))
+        info = TrackerStepInfo(association, log_weights, hit, claimed, born, dropped.astype(jnp.int32),
+                               log_likelihood, ok)
+        return new_table, info
+
+    def _predict(self, table: TrackTable):
+        """Every slot predicted with the filter's ``predict`` (empty slots hold the initiator's
+        prior: finite, then discarded), and the predicted existence."""
+        k = table.step
+        pred_mean, pred_cov = jax.vmap(lambda x, P: self.filter.predict(self.model, x, P, k))(table.mean, table.cov)
+        existence_pred = table.existence if self.existence is None else self.existence.predict(table.existence)
+        return pred_mean, pred_cov, existence_pred
+
+    def _log_weights(self, loglik, nis, live, valid, existence_pred):
+        """The association's log-weight matrix ``L`` ``(N, 1 + M)``
+        (:func:`~jaxtrack.association.log_likelihood_ratios`)."""
         log_weights, _ = log_likelihood_ratios(
-            loglik,
-            nis,
-            live,
-            valid,
-            prob_detect=self.prob_detect,
-            clutter_density=self.clutter_density,
-            gate_threshold=self.gate,
-            prob_gate=self.prob_gate,
+            loglik, nis, live, valid, prob_detect=self.prob_detect, clutter_density=self.clutter_density,
+            gate_threshold=self.gate, prob_gate=self.prob_gate,
             # Empty slots hold existence 0; give them 1 (their rows are replaced as padding anyway)
             # so that the log(r) inside is finite there and reverse mode gets no 0·inf = NaN.
             existence=jnp.where(live, existence_pred, 1.0) if self.existence is not None else None,
         )
-        association = self.association(log_weights, live)
-        beta = association.association_probabilities
+        return log_weights
 
-        # 4. Update. With existence, beta[t, 0] mixes "exists, not detected" and "does not exist";
-        # the state is conditioned on existence (Mušicki & Evans 2004, eqs. (27)-(31)).
-        if self.existence is not None:
-            pdpg = self.prob_detect * self.prob_gate
-            undetected = existence_pred * (1.0 - pdpg) / (1.0 - existence_pred * pdpg)
-            exist_post = beta[:, 0] * undetected + jnp.sum(beta[:, 1:], axis=1)
-            # A sum of probabilities can round to just above 1 (with P_S = 1 and r → 1), which the
-            # next scan's log_likelihood_ratios rejects (NaN under jit): keep it a probability.
-            exist_post = jnp.minimum(exist_post, 1.0)
-            safe = jnp.where(exist_post > 0, exist_post, 1.0)
-            weights = jnp.concatenate([(beta[:, :1] * undetected[:, None]), beta[:, 1:]], axis=1)
-            weights = weights / safe[:, None]
-        else:
-            exist_post = jnp.where(live, 1.0, 0.0).astype(dtype)
-            weights = beta
-        post_mean, post_cov = jax.vmap(pda_update)(conditioned, weights, pred_mean, pred_cov)
-
-        # 5. Manage. A hit: some detection more probable than the miss (Stone Soup's rule).
-        hit = live & jnp.any(beta[:, 1:] > beta[:, :1], axis=1)
-        claimed = jnp.any(live[:, None] & (beta[:, 1:] > beta[:, :1]), axis=0) & valid
-        mgmt = self.management
-        window_mask = (1 << mgmt.confirm_window) - 1
-        hits = ((table.hits << 1) | hit.astype(jnp.int32)) & window_mask
-        misses = jnp.where(hit, 0, table.misses + 1)
-        num_hits = _popcount(hits, mgmt.confirm_window)
-        age = k - table.born_at + 1  # scans seen, this one included
-        tentative = table.status == TENTATIVE
-        confirm = tentative & (num_hits >= mgmt.confirm_hits)
-        if mgmt.confirm_existence is not None:
-            confirm = confirm | (tentative & (exist_post >= mgmt.confirm_existence))
-        # A tentative track that cannot reach M hits within its first N scans is deleted.
-        hopeless = tentative & ~confirm & (num_hits + (mgmt.confirm_window - age) < mgmt.confirm_hits)
-        delete = live & ((misses >= mgmt.delete_after_misses) | hopeless)
-        if mgmt.delete_existence is not None:
-            delete = delete | (live & (exist_post < mgmt.delete_existence))
-        status = jnp.where(confirm, CONFIRMED, table.status)
-        status = jnp.where(delete, EMPTY, status)
-        keep = status != EMPTY
-        mean = jnp.where(keep[:, None], post_mean, self.initiator.prior_mean.astype(dtype))
-        cov = jnp.where(keep[:, None, None], post_cov, self.initiator.prior_cov.astype(dtype))
-
-        # 6. Initiate at the unclaimed measurements, in free slots (ranks by cumulative sums).
-        born_state = jax.vmap(lambda z: self._initiate(z, k))(measurements)
-        new = valid & ~claimed
-        free = ~keep
-        N, M = self.capacity, measurements.shape[0]
-        free_slots = jnp.nonzero(free, size=N, fill_value=N)[0]  # free slot indices, ascending
-        new_meas = jnp.nonzero(new, size=M, fill_value=M)[0]  # new measurements, ascending
-        num_new = jnp.sum(new)
-        num_born = jnp.minimum(num_new, jnp.sum(free))
-        # Slot free_slots[q] receives measurement new_meas[q] for q < num_born.
-        q = jnp.arange(N)
-        meas_of_q = jnp.where(q < num_born, new_meas[jnp.minimum(q, M - 1)], M).astype(jnp.int32)
-        slot_meas = jnp.full((N + 1,), M, jnp.int32).at[free_slots].set(meas_of_q)[:N]
-        births = slot_meas < M
-        take = jnp.minimum(slot_meas, M - 1)
-        slot_rank = jnp.cumsum(births) - 1
-        b_mean, b_cov = born_state
-        mean = jnp.where(births[:, None], b_mean[take], mean)
-        cov = jnp.where(births[:, None, None], b_cov[take], cov)
-        first_status = CONFIRMED if mgmt.confirm_hits == 1 else TENTATIVE
-        status = jnp.where(births, first_status, status)
-        existence = jnp.where(keep, exist_post, 0.0)
-        existence = jnp.where(births, self.initiator.existence.astype(dtype), existence)
-        hits = jnp.where(births, 1, jnp.where(keep, hits, 0))
-        misses = jnp.where(births | ~keep, 0, misses)
-        track_id = jnp.where(births, table.next_id + slot_rank, jnp.where(keep, table.track_id, -1))
-        born_at = jnp.where(births, k, jnp.where(keep, table.born_at, -1))
-        born = jnp.zeros((M + 1,), bool).at[slot_meas].set(births, mode="drop")[:M]
-        dropped = num_new - num_born
-        new_table = TrackTable(
-            mean=mean,
-            cov=cov,
-            status=status.astype(jnp.int32),
-            existence=existence,
-            hits=hits.astype(jnp.int32),
-            misses=misses.astype(jnp.int32),
-            track_id=track_id.astype(jnp.int32),
-            born_at=born_at.astype(jnp.int32),
-            next_id=table.next_id + num_born.astype(jnp.int32),
-            step=k + 1,
-            num_dropped_births=table.num_dropped_births + dropped.astype(jnp.int32),
-        )
-        # 7. The scan's log-likelihood given the predicted tracks (derived in the docstring).
+    def _log_likelihood(self, valid, association, dtype):
+        """The scan's log-likelihood given the predicted tracks (derived in :meth:`step`)."""
         num_meas = jnp.sum(valid).astype(dtype)
         clutter_density = self.clutter_density.astype(dtype)
         log_likelihood = (num_meas * jnp.log(clutter_density) - jax.scipy.special.gammaln(num_meas + 1.0)
                           + association.log_normalizer.astype(dtype))
         if self.clutter_volume is not None:
             log_likelihood = log_likelihood - clutter_density * self.clutter_volume.astype(dtype)
-        info = TrackerStepInfo(association, log_weights, hit, claimed, born, dropped.astype(jnp.int32),
-                               log_likelihood)
-        return new_table, info
+        return log_likelihood
 
-    def _initiate(self, z, k):
-        init_filter = self.filter if self.initiator.filter is None else self.initiator.filter
-        z = jnp.where(jnp.isfinite(z), z, 0.0)  # padded rows: never used, kept finite
-        post = init_filter.update(
-            self.model, self.initiator.prior_mean, self.initiator.prior_cov, z,
-            jnp.ones(z.shape, bool), k,
-        )
-        return post.mean, post.cov
+    def _parameters_ok(self):
+        """``P_D`` in (0, 1] and ``λ`` finite and > 0: checked at construction when concrete, here
+        when traced (a NaN or 1.5 ``P_D`` under jit would otherwise give NaN or wrong weights)."""
+        pd, lam = self.prob_detect, self.clutter_density
+        return (pd > 0.0) & (pd <= 1.0) & (lam > 0.0) & jnp.isfinite(lam)
 
 
 def _popcount(bits: Array, width: int) -> Array:
@@ -546,7 +595,10 @@ class TrackerResult(eqx.Module):
     ``final``: the last :class:`TrackTable`; ``overflow`` ``()``: a birth was refused;
     ``log_likelihood`` ``(T,)``: each scan's log-likelihood given the tracks predicted into it
     (nats; :meth:`Tracker.step`), whose sum is the run's log-likelihood under the tracker's
-    approximations (maximised by :func:`~jaxtrack.multitarget.fit_detection_and_clutter`).
+    approximations (maximised by :func:`~jaxtrack.multitarget.fit_detection_and_clutter`);
+    ``ok`` ``(T,)``: each scan's :attr:`TrackerStepInfo.ok` (False where a number is not to be
+    trusted: the association could not answer, a parameter or a measurement marked valid is not
+    finite).
     """
 
     mean: Float[Array, "T N n"]
@@ -558,27 +610,23 @@ class TrackerResult(eqx.Module):
     final: TrackTable
     overflow: Bool[Array, ""]
     log_likelihood: Float[Array, " T"]
+    ok: Bool[Array, " T"]
 
 
-@eqx.filter_jit
+def _record_tracker(tracker, table, info):
+    return (table.mean, None, table.status, table.existence, table.track_id,
+            info.association.association_probabilities, info.log_likelihood, info.ok)
+
+
+def _record_tracker_cov(tracker, table, info):
+    return (table.mean, table.cov, table.status, table.existence, table.track_id,
+            info.association.association_probabilities, info.log_likelihood, info.ok)
+
+
 def _run_tracker(tracker, measurements, valid, save_cov):
-    def body(table, scan):
-        table, info = tracker.step(table, *scan)
-        out = (
-            table.mean,
-            table.cov if save_cov else None,
-            table.status,
-            table.existence,
-            table.track_id,
-            info.association.association_probabilities,
-            info.log_likelihood,
-        )
-        return table, out
-
-    final, (mean, cov, status, existence, track_id, beta, log_likelihood) = jax.lax.scan(
-        body, tracker.init(), (measurements, valid)
-    )
-    return TrackerResult(mean, cov, status, existence, track_id, beta, final, final.overflow, log_likelihood)
+    final, (mean, cov, status, existence, track_id, beta, log_likelihood, ok) = scan_method(
+        tracker, measurements, valid, _record_tracker_cov if save_cov else _record_tracker)
+    return TrackerResult(mean, cov, status, existence, track_id, beta, final, final.overflow, log_likelihood, ok)
 
 
 def check_measurement_dim(tracker: "Tracker", measurements: Array) -> None:
@@ -607,11 +655,16 @@ def run_tracker(
       ``valid``: boolean ``(T, M)``, False for padding. A scenario's
       ``trajectory.scans.measurements`` and ``.valid`` are in this form.
     - ``save_cov``: also keep every scan's covariances (``(T, N, n, n)``).
-    - ``warn``: warn (:class:`CapacityWarning`) on the host when births were refused for want of
-      track slots (concrete results only).
+    - ``warn``: on the host (concrete results only), a :class:`CapacityWarning` when births were
+      refused for want of track slots or the association could not answer a scan within its
+      capacity (both counted in :meth:`Tracker.capacity_events`), and a ``RuntimeWarning`` when a
+      scan was not ``ok``.
 
     **Returns:** a :class:`TrackerResult`. Under ``jax.vmap`` over runs it batches like any
-    filter run.
+    filter run. It is :func:`~jaxtrack.multitarget.run_multitarget`'s scan keeping more of the table.
+
+    **Raises:** :class:`~jaxtrack.InputError` naming ``measurements`` or ``valid`` (shapes, or a
+    non-finite measurement marked valid when concrete).
     """
     measurements = jnp.asarray(measurements)
     valid = jnp.asarray(valid, bool)
@@ -621,12 +674,9 @@ def run_tracker(
             f"{measurements.shape} and {valid.shape}."
         )
     check_measurement_dim(tracker, measurements)
+    measurements, valid = check_scans(measurements, valid, tracker.model.meas_dim)
     result = _run_tracker(tracker, measurements, valid, save_cov)
-    if warn and is_concrete(result.overflow) and bool(result.overflow):
-        warnings.warn(
-            f"the track table's capacity ({tracker.capacity} slots) was too small: "
-            f"{int(result.final.num_dropped_births)} track births were refused; raise `capacity`.",
-            CapacityWarning,
-            stacklevel=2,
-        )
+    if warn:
+        warn_capacity(tracker, tracker.capacity_events(result.final))
+        warn_not_ok(tracker, result.ok)
     return result

@@ -8,7 +8,7 @@ existence for JIPDA). The study assembles library parts:
 
 - :mod:`.scenario` — the scenario and the trackers (:func:`trackers`), with why each setting
   (table capacity, 3-of-4 confirmation, JIPDA's initial existence) was chosen;
-- :mod:`.montecarlo` — :func:`jaxtrack.multitarget.tracker_monte_carlo` of every tracker on
+- :mod:`.montecarlo` — :func:`jaxtrack.multitarget.multitarget_monte_carlo` of every tracker on
   the same runs (:func:`run_study`), and one run's tracks (:func:`example_run`);
 - :mod:`.figures`, :mod:`.rows` — figures, :func:`paper_rows` (the claims with their stated
   margins) and :func:`reproduce`.

@@ -1,5 +1,5 @@
 """Multi-target study figures. Every number comes from :mod:`.montecarlo`
-(:class:`~jaxtrack.multitarget.TrackerMonteCarloResult` fields, one run's
+(:class:`~jaxtrack.multitarget.MultiTargetMonteCarloResult` fields, one run's
 :class:`~jaxtrack.multitarget.TrackerResult`)."""
 
 from __future__ import annotations

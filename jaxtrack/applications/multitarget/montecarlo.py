@@ -1,5 +1,5 @@
 """The multi-target study's Monte Carlo: each tracker through
-:func:`jaxtrack.multitarget.tracker_monte_carlo` on the same runs (run ``i`` is
+:func:`jaxtrack.multitarget.multitarget_monte_carlo` on the same runs (run ``i`` is
 ``simulate_scenario(scenario, fold_in(key, i))`` for every tracker), and one run's tracks."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import dataclasses
 import jax
 import numpy as np
 
-from ...multitarget import MultiTargetTrajectory, TrackerMonteCarloResult, run_tracker, simulate_scenario, \
-    tracker_monte_carlo
+from ...multitarget import MultiTargetTrajectory, MultiTargetMonteCarloResult, run_tracker, simulate_scenario, \
+    multitarget_monte_carlo
 from .scenario import CUTOFF, ORDER, TRACKERS, scenario, trackers
 
 DEFAULT_RUNS = 32
@@ -21,10 +21,10 @@ EVALUATION_KEY = 30
 @dataclasses.dataclass(frozen=True)
 class MultiTargetStudy:
     """What :func:`run_study` returns: ``results``, a
-    :class:`~jaxtrack.multitarget.TrackerMonteCarloResult` per tracker of
+    :class:`~jaxtrack.multitarget.MultiTargetMonteCarloResult` per tracker of
     :data:`~.scenario.TRACKERS`, all on the same runs."""
 
-    results: dict[str, TrackerMonteCarloResult]
+    results: dict[str, MultiTargetMonteCarloResult]
 
     @property
     def num_runs(self) -> int:
@@ -42,7 +42,7 @@ def run_study(num_runs: int = DEFAULT_RUNS, *, block_size: int = BLOCK_SIZE, pro
     scen = scenario()
     trk = trackers(scen) if capacity is None else trackers(scen, capacity)
     key = jax.random.key(EVALUATION_KEY)
-    results = {name: tracker_monte_carlo(trk[name], scen, key, num_runs, cutoff=CUTOFF, order=ORDER,
+    results = {name: multitarget_monte_carlo(trk[name], scen, key, num_runs, cutoff=CUTOFF, order=ORDER,
                                          block_size=block_size, progress=progress)
                for name in TRACKERS}
     return MultiTargetStudy(results)

@@ -5,7 +5,7 @@ the margin the study commits to (``bound="at_most"``/``"at_least"``, the referen
 holding the bound; ``source="claim"``), so that ``jaxtrack reproduce multitarget`` fails if a
 change to the library breaks it.
 
-The GOSPA claims use the upper end of the 95% interval. :func:`tracker_monte_carlo` gives the
+The GOSPA claims use the upper end of the 95% interval. :func:`multitarget_monte_carlo` gives the
 interval per scan; the time average of the per-scan upper ends is an upper 95% bound of the
 time-averaged GOSPA that is conservative (a standard deviation of a sum is at most the sum of
 the standard deviations), so no per-run data is needed.
@@ -52,7 +52,7 @@ def paper_rows(study: MultiTargetStudy | None = None, num_runs: int = DEFAULT_RU
     fj, fp = float(res["jipda"].scores.num_false), float(res["jpda"].scores.num_false)
     rows.append(PaperRow("MT6", f"JIPDA/JPDA false tracks per run ({fj:.2f} / {fp:.2f})",
                          FALSE_TRACK_RATIO, fj / fp if fp > 0 else float("nan"), 0.0, "at_most", source="claim"))
-    refused = sum(res[n].scans_overflowed + res[n].births_dropped for n in TRACKERS)
+    refused = sum(res[n].scans_overflowed + res[n].capacity_events for n in TRACKERS)
     rows.append(PaperRow("MT7", "scans overflowed + track births refused, all trackers and runs",
                          0.0, float(refused), 0.0, "at_most", source="claim"))
     return rows

@@ -8,7 +8,7 @@ GOSPA (c = 10 m, p = 2, α = 2) with its localisation, missed and false parts. T
 assembles library parts:
 
 - :mod:`.scenario` — the scenario and the five methods (:func:`methods`), with their settings;
-- :mod:`.montecarlo` — :func:`jaxtrack.multitarget.tracker_monte_carlo` of every method on the
+- :mod:`.montecarlo` — :func:`jaxtrack.multitarget.multitarget_monte_carlo` of every method on the
   same runs (:func:`run_study`);
 - :mod:`.figures`, :mod:`.rows` — the figure, :func:`paper_rows` (claims with margins) and
   :func:`reproduce`.

@@ -1,5 +1,5 @@
 """The Williams (2015) study's Monte Carlo: every method through
-:func:`jaxtrack.multitarget.tracker_monte_carlo` on the same runs (run ``i`` is
+:func:`jaxtrack.multitarget.multitarget_monte_carlo` on the same runs (run ``i`` is
 ``simulate_scenario(scenario, fold_in(key, i))`` for every method: the truth is fixed, the
 detections and clutter are redrawn)."""
 
@@ -10,7 +10,7 @@ import dataclasses
 import jax
 import numpy as np
 
-from ...multitarget import TrackerMonteCarloResult, tracker_monte_carlo
+from ...multitarget import MultiTargetMonteCarloResult, multitarget_monte_carlo
 from .scenario import METHODS, PMBM_HYPOTHESES, methods, scenario
 
 DEFAULT_RUNS = 100  # the reference's Nmc
@@ -21,9 +21,9 @@ EVALUATION_KEY = 15
 @dataclasses.dataclass(frozen=True)
 class Williams15Study:
     """What :func:`run_study` returns: ``results``, a
-    :class:`~jaxtrack.multitarget.TrackerMonteCarloResult` per method of :data:`~.scenario.METHODS`."""
+    :class:`~jaxtrack.multitarget.MultiTargetMonteCarloResult` per method of :data:`~.scenario.METHODS`."""
 
-    results: dict[str, TrackerMonteCarloResult]
+    results: dict[str, MultiTargetMonteCarloResult]
 
     @property
     def num_runs(self) -> int:
@@ -42,7 +42,7 @@ def run_study(num_runs: int = DEFAULT_RUNS, *, block_size: int = BLOCK_SIZE, pro
     scen, settings = scenario()
     meth = methods(scen, settings, pmbm_hypotheses)
     key = jax.random.key(EVALUATION_KEY)
-    results = {name: tracker_monte_carlo(meth[name], scen, key, num_runs, cutoff=settings.gospa_cutoff,
+    results = {name: multitarget_monte_carlo(meth[name], scen, key, num_runs, cutoff=settings.gospa_cutoff,
                                          order=settings.gospa_order, block_size=min(block_size, num_runs),
                                          progress=progress)
                for name in names}

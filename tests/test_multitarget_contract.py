@@ -1,0 +1,171 @@
+"""The multi-target contract: all five families through one scan and one Monte Carlo.
+
+- every family implements :class:`~jaxtrack.multitarget.AbstractMultiTargetFilter`, and
+  :func:`~jaxtrack.multitarget.run_multitarget` gives the estimates of its own ``run_*``;
+- the families' runs and :func:`~jaxtrack.multitarget.multitarget_monte_carlo` equal, bit for bit,
+  what the pre-contract code gave (``tests/data/multitarget_contract.npz``, written by
+  ``tests/_multitarget_cases.py`` at 0847afe);
+- the Monte Carlo keeps every run's GOSPA, exports, and an interrupted run hands back what finished.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import NamedTuple
+
+import jax
+import numpy as np
+import pytest
+
+from _multitarget_cases import CUTOFF, MC_KEY, MC_RUNS, REFERENCE, RUN_KEY, _fields, old_methods, scenario
+from jaxtrack.multitarget import (
+    AbstractMultiTargetFilter,
+    MultiTargetMonteCarloResult,
+    multitarget_monte_carlo,
+    run_cphd,
+    run_multitarget,
+    run_phd,
+    run_pmbm,
+    run_tracker,
+    simulate_scenario,
+)
+
+RUNS = {"phd": run_phd, "cphd": run_cphd, "pmb": run_pmbm, "pmbm": run_pmbm, "jpda": run_tracker}
+
+
+@pytest.fixture(scope="module")
+def case():
+    scen, settings = scenario()
+    truth = simulate_scenario(scen, RUN_KEY)
+    return scen, old_methods(scen, settings), truth.scans.measurements, truth.scans.valid
+
+
+@pytest.fixture(scope="module")
+def reference():
+    with np.load(REFERENCE) as data:
+        return {k: data[k] for k in data.files}
+
+
+def _quiet(fn, *args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fn(*args, **kwargs)
+
+
+@pytest.mark.parametrize("name", ["phd", "cphd", "pmb", "pmbm", "jpda"])
+def test_every_family_runs_through_the_one_scan_as_before(case, reference, name):
+    """A family's ``run_*`` equals its pre-contract result bit for bit, and ``run_multitarget``
+    reports the same estimates."""
+    scen, methods, z, v = case
+    method = methods[name]
+    assert isinstance(method, AbstractMultiTargetFilter)
+    new = _fields(_quiet(RUNS[name], method, z, v, warn=False))
+    keys = [k for k in reference if k.startswith(f"{name}/run/")]
+    assert keys
+    for key in keys:
+        np.testing.assert_array_equal(new[key.split("/", 2)[2]], reference[key], err_msg=key)
+    generic = _quiet(run_multitarget, method, z, v, warn=False)
+    if name == "jpda":
+        states, mask = reference["jpda/run/mean"], reference["jpda/run/status"] == 2
+        ids = np.where(mask, reference["jpda/run/track_id"], -1)
+    else:
+        pre = "phd" if name in ("phd", "cphd") else None
+        states = reference[f"{name}/run/estimates"]
+        mask = reference[f"{name}/run/estimate_mask"]
+        ids = (np.where(mask, np.arange(mask.shape[1]), -1) if pre else reference[f"{name}/run/estimate_id"])
+    np.testing.assert_array_equal(np.asarray(generic.estimates.mask), mask)
+    np.testing.assert_array_equal(np.asarray(generic.estimates.ids), ids)
+    np.testing.assert_array_equal(np.asarray(generic.estimates.states)[mask], states[mask])
+    assert bool(np.all(generic.ok))
+
+
+@pytest.mark.parametrize("name", ["phd", "cphd", "pmb", "pmbm", "jpda"])
+def test_every_family_runs_through_the_one_monte_carlo_as_before(case, reference, name):
+    scen, methods, _, _ = case
+    mc = _quiet(multitarget_monte_carlo, methods[name], scen, MC_KEY, MC_RUNS, cutoff=CUTOFF, block_size=MC_RUNS)
+    assert isinstance(mc, MultiTargetMonteCarloResult) and mc.completed and mc.num_runs == MC_RUNS
+    new = _fields(mc)
+    new["births_dropped"] = np.asarray(mc.capacity_events)
+    keys = [k for k in reference if k.startswith(f"{name}/mc/")]
+    for key in keys:
+        np.testing.assert_array_equal(new[key.split("/", 2)[2]], reference[key], err_msg=key)
+    # Every run's GOSPA is kept and averages to the mean (the sums are added block by block).
+    assert mc.per_run_gospa.shape == (MC_RUNS, scen.num_steps)
+    np.testing.assert_allclose(mc.per_run_gospa.mean(axis=0), mc.gospa, rtol=1e-13)
+
+
+def test_monte_carlo_result_exports_and_loads(case, tmp_path):
+    scen, methods, _, _ = case
+    mc = _quiet(multitarget_monte_carlo, methods["jpda"], scen, MC_KEY, 2, cutoff=CUTOFF, block_size=2)
+    back = MultiTargetMonteCarloResult.load(mc.save(tmp_path / "mc.npz"))
+    np.testing.assert_array_equal(back.per_run_gospa, mc.per_run_gospa)
+    np.testing.assert_array_equal(back.scores.num_switches, mc.scores.num_switches)
+    assert (back.num_runs, back.method_name, back.completed) == (2, "Tracker", True)
+
+
+def test_an_interrupted_monte_carlo_hands_back_the_finished_blocks(case, monkeypatch):
+    """Ctrl-C after the second of three blocks: the exception carries the result of the first two
+    blocks, equal to a 4-run Monte Carlo (blocks of 2)."""
+    from jaxtrack.montecarlo import MonteCarloInterrupted
+    from jaxtrack.montecarlo import _engine
+
+    scen, methods, _, _ = case
+    method = methods["jpda"]
+    calls = {"n": 0}
+    real_wait = _engine._wait
+
+    def wait_then_interrupt(tree):
+        calls["n"] += 1
+        out = real_wait(tree)
+        if calls["n"] == 2:
+            raise KeyboardInterrupt
+        return out
+
+    monkeypatch.setattr(_engine, "_wait", wait_then_interrupt)
+    monkeypatch.setattr(_engine, "_WAIT_SECONDS", 0.0)  # wait after every block
+    with pytest.raises(KeyboardInterrupt) as info:
+        _quiet(multitarget_monte_carlo, method, scen, MC_KEY, 6, cutoff=CUTOFF, block_size=2)
+    assert isinstance(info.value, MonteCarloInterrupted)
+    partial = info.value.partial
+    assert partial is not None and not partial.completed and partial.num_runs == 4
+    monkeypatch.setattr(_engine, "_wait", real_wait)
+    full4 = _quiet(multitarget_monte_carlo, method, scen, MC_KEY, 4, cutoff=CUTOFF, block_size=2)
+    np.testing.assert_array_equal(partial.per_run_gospa, full4.per_run_gospa)
+    np.testing.assert_array_equal(partial.gospa, full4.gospa)
+
+
+def test_a_new_family_needs_only_the_four_methods(case):
+    """A user's own method (here: report the scan's valid measurements as targets) runs through
+    run_multitarget with no change to the library."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from jaxtrack.multitarget import Estimates
+
+    scen, _, z, v = case
+
+    class EchoMeasurements(AbstractMultiTargetFilter):
+        model: object
+        labelled = False
+
+        def init(self):
+            return (jnp.zeros(z.shape[1:]), jnp.zeros(z.shape[1], bool))
+
+        def step(self, state, measurements, valid):
+            # The step record is the family's own; the scan reads its `ok`.
+            return (jnp.where(valid[:, None], measurements, 0.0), valid), _EchoInfo(jnp.ones((), bool))
+
+        def estimates(self, state):
+            zz, vv = state
+            return Estimates(zz, vv, jnp.where(vv, jnp.arange(vv.shape[0]), -1))
+
+        def capacity_events(self, state):
+            return jnp.zeros((), jnp.int32)
+
+    result = run_multitarget(EchoMeasurements(scen.model), z, v)
+    np.testing.assert_array_equal(np.asarray(result.estimates.mask), np.asarray(v))
+    assert eqx.is_array(result.capacity_events)
+
+
+class _EchoInfo(NamedTuple):
+    ok: jax.Array

@@ -1,0 +1,114 @@
+"""Degenerate input to the multi-target layer is answered by an error naming the argument, a
+warning, or ``ok=False`` — never by a number that looks right (issue: "no silent answer").
+
+Each case was a silent answer before: ``Tracker(clutter_density=inf)`` accepted; a NaN
+measurement marked valid tracked as a number by trackers, GM-PHD and PMBM; a traced NaN or 1.5
+``P_D`` giving NaN tracks with no flag on ``TrackerResult``; ``clutter_density = 0`` accepted by
+the GM-PHD and PMBM (a measurement no component reaches is then 0/0); a JPDA cluster beyond its
+caps flagged only deep inside the step's association, not counted by the tracker.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from _multitarget_cases import RUN_KEY, old_methods, scenario
+from jaxtrack import InputError
+from jaxtrack.association import JPDA
+from jaxtrack.filters import KalmanFilter
+from jaxtrack.multitarget import (
+    GMPHD,
+    PMBM,
+    CapacityWarning,
+    OnePointInitiator,
+    Tracker,
+    run_multitarget,
+    run_tracker,
+    simulate_scenario,
+)
+
+
+@pytest.fixture(scope="module")
+def case():
+    scen, settings = scenario()
+    truth = simulate_scenario(scen, RUN_KEY)
+    z = np.asarray(truth.scans.measurements)[:6]
+    v = np.asarray(truth.scans.valid)[:6]
+    return scen, settings, old_methods(scen, settings), z, v
+
+
+def _with_nan(z, v):
+    z = z.copy()
+    k, j = 3, int(np.flatnonzero(v[3])[0])
+    z[k, j, 0] = np.nan
+    return z, k
+
+
+@pytest.mark.parametrize("name", ["jpda", "phd", "pmbm"])
+def test_a_nan_measurement_marked_valid_is_refused_eagerly_and_flagged_traced(case, name):
+    _, _, methods, z, v = case
+    bad, k = _with_nan(z, v)
+    with pytest.raises(InputError, match="measurements"):
+        run_multitarget(methods[name], bad, v)
+    # Traced, the check cannot run on the host: the scan's `ok` says it (the scans before are ok;
+    # a NaN that got into a mixture keeps the later scans not ok too).
+    ok = np.asarray(jax.jit(lambda zz: run_multitarget(methods[name], zz, v, warn=False).ok)(bad))
+    assert not ok[k] and np.all(ok[:k])
+    assert np.all(np.asarray(jax.jit(lambda zz: run_multitarget(methods[name], zz, v, warn=False).ok)(z)))
+
+
+def test_tracker_refuses_an_infinite_clutter_density(case):
+    scen, s, _, _, _ = case
+    init = OnePointInitiator(np.asarray(s.birth_means[0]), np.asarray(s.birth_covs[0]))
+    for bad in (np.inf, np.nan, 0.0):
+        with pytest.raises(InputError, match="clutter_density"):
+            Tracker(KalmanFilter(), scen.model, JPDA(), init, prob_detect=0.9, clutter_density=bad, capacity=8)
+
+
+@pytest.mark.parametrize("bad", [np.nan, 1.5, 0.0])
+def test_a_traced_bad_detection_probability_is_not_ok(case, bad):
+    _, _, methods, z, v = case
+    tracker = methods["jpda"]
+
+    def run(pd):
+        return run_tracker(eqx.tree_at(lambda t: t.prob_detect, tracker, pd), z, v, warn=False).ok
+
+    ok = jax.jit(run)(jnp.asarray(bad))
+    assert not bool(np.any(ok))
+    assert bool(np.all(jax.jit(run)(jnp.asarray(0.9))))  # the same compiled scan with a good P_D
+
+
+def test_zero_clutter_density_is_refused_by_the_phd_and_pmbm(case):
+    scen, s, _, _, _ = case
+    common = dict(prob_survival=0.99, prob_detect=0.9, clutter_density=0.0, birth_weights=s.birth_weights,
+                  birth_means=s.birth_means, birth_covs=s.birth_covs)
+    with pytest.raises(InputError, match="clutter_density"):
+        GMPHD(KalmanFilter(), scen.model, capacity=8, **common)
+    with pytest.raises(InputError, match="clutter_density"):
+        PMBM(KalmanFilter(), scen.model, max_tracks=8, max_hypotheses=2, **common)
+
+
+def test_a_jpda_cluster_beyond_its_caps_is_counted_and_warned(case):
+    """Eight targets within a few metres of each other (one gating cluster of 8 tracks) and an exact
+    JPDA capped at clusters of 2 tracks: the tracker counts each such scan, warns, and marks it not ok."""
+    _, _, methods, z, v = case
+    rng = np.random.default_rng(3)
+    z = np.full((6, 24, 2), np.nan)
+    z[:, :8] = np.array([100.0, 100.0]) + 2.0 * rng.standard_normal((6, 8, 2))
+    v = np.zeros((6, 24), bool)
+    v[:, :8] = True
+    tracker = eqx.tree_at(lambda t: t.association, methods["jpda"],
+                          JPDA(max_exact=2, max_cluster_tracks=2, max_cluster_measurements=4, max_large_clusters=1))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = run_tracker(tracker, z, v)
+    failures = int(result.final.num_association_failures)
+    assert failures > 0 and failures == int(np.sum(~np.asarray(result.ok)))
+    assert int(tracker.capacity_events(result.final)) >= failures
+    assert any(issubclass(w.category, CapacityWarning) and "association" in str(w.message) for w in caught)
