@@ -270,19 +270,6 @@ def _check_scans(measurements, valid, meas_dim):
     return check_scans(measurements, valid, meas_dim)
 
 
-def _warn_capacity(what, capacity, result):
-    """A host-side :class:`CapacityWarning` when ``result`` (with ``overflow``, ``num_dropped``,
-    ``dropped_weight``) is concrete and the reduction left components over."""
-    if is_concrete(result.overflow) and bool(result.overflow):
-        warnings.warn(
-            f"the {what} mixture's capacity ({capacity} components) was too small: "
-            f"{int(jnp.sum(result.num_dropped))} components (weight {float(jnp.sum(result.dropped_weight)):.3g}) "
-            "were left over by the reduction; raise `capacity`.",
-            CapacityWarning,
-            stacklevel=3,
-        )
-
-
 class GMPHD(AbstractMultiTargetFilter):
     r"""The GM-PHD filter of Vo & Ma (2006) with a fixed component budget ``J_max``.
 
