@@ -45,7 +45,6 @@ form as their derivative rule (:mod:`._reduction`: the measured costs are there)
 from __future__ import annotations
 
 import math
-import warnings
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
@@ -60,7 +59,7 @@ from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
 from ._base import AbstractMultiTargetFilter, Estimates, check_scans, scan_method, scan_ok, warn_capacity, warn_not_ok
 from ._reduction import _reduce_mixture
-from ._scenario import CapacityWarning, _positive_int
+from ._scenario import _positive_int
 
 _REDUCTIONS = ("vo-ma", "stonesoup")
 
