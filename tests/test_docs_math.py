@@ -70,6 +70,21 @@ def test_docstring_math_directive_becomes_display_math_and_no_link():
     assert html.count('class="katex-display"') == 1 and "after" in html
 
 
+def test_a_display_formula_left_raw_is_caught():
+    """A ``.. math::`` indented inside a docstring's list item came out as raw ``$$`` text (LoopyBP's
+    Bethe formula did); tools/check_site.py now reports such a page. LoopyBP's docstring renders."""
+    import inspect
+
+    from jaxtrack.association import LoopyBP
+
+    griffe_roles = _load("griffe_roles")
+    nested = "- item:\n\n  .. math::\n\n      a = b\n\n  (after)\n"
+    assert check_site.raw_display_math(site_markdown(griffe_roles.rewrite(nested, "jaxtrack.x", set())))
+    html = site_markdown(griffe_roles.rewrite(inspect.cleandoc(LoopyBP.__doc__), "jaxtrack.association.LoopyBP", set()))
+    assert not check_site.raw_display_math(html) and html.count('class="katex-display"') == 2
+    assert not check_site.raw_display_math('<code>$$x$$</code><annotation encoding="x">$$</annotation>')
+
+
 def test_a_formula_katex_cannot_parse_stops_the_build():
     with pytest.raises(hooks.PluginError, match="page.md"):
         hooks.typeset_arithmatex('<span class="arithmatex">\\(\\frac{\\)</span>', "page.md")

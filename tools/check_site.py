@@ -93,6 +93,13 @@ def figures_in(html: str) -> int:
     return len(re.findall(r"<img[^>]*data:image/png", html))
 
 
+def raw_display_math(html: str) -> bool:
+    """Whether a page's text shows ``$$`` (TeX a reader would see as source): outside scripts,
+    styles, code and KaTeX's own TeX annotations."""
+    text = re.sub(r"<(script|style|code|pre|annotation)\b.*?</\1>", "", html, flags=re.S | re.I)
+    return "$$" in text
+
+
 def math_problems(site: Path) -> list[str]:
     """Formulas untypeset, a math page without KaTeX output, a MathJax loader, the tqdm warning."""
     problems = []
@@ -107,6 +114,9 @@ def math_problems(site: Path) -> list[str]:
         rel = page.relative_to(site)
         if 'class="arithmatex"' in html:
             problems.append(f"math: {rel} holds TeX left untypeset")
+        if raw_display_math(html):
+            problems.append(f"math: {rel} shows a raw $$ formula (a display block arithmatex did not take, e.g. "
+                            "a `.. math::` indented inside a docstring's list item)")
         if "MathJax" in html:
             problems.append(f"math: {rel} loads MathJax (the site typesets at build time)")
         if TQDM_WARNING in html:

@@ -395,20 +395,23 @@ class LoopyBP(AbstractAssociator):
     - ``clutter_probabilities``: the measurement beliefs ``1 / (1 + Σ_t μ_{t→j})`` (equal to
       ``1 − Σ_t β_{tj}`` at a fixed point; 1 for a column no track can take);
     - ``log_normalizer``: the Bethe estimate of ``log Z`` (exact on trees at convergence),
-      ``−F_B`` at the current beliefs:
-
-      .. math::
-
-          \log Z_B = \sum_t L_{t0} + \sum_{t, j ≥ 1} β_{tj}(\log ψ_{tj} − \log β_{tj})
-          − \sum_t β_{t0}\log β_{t0} − \sum_j c_j \log c_j
-          + \sum_{t, j ≥ 1} (1 − β_{tj}) \log (1 − β_{tj})
-
-      (the Bethe free energy of the matching; the last term is minus the mutual information of
-      the track and measurement variables on each edge, cf. Vontobel 2013, "The Bethe
-      permanent of a nonnegative matrix", for the square case without misses);
+      ``−F_B`` at the current beliefs, ``log Z_B`` below;
     - ``residual``: ``max |Δ log ν_{j→t}|`` over gated pairs in the last iteration;
     - ``ok``: False if anything is not finite — e.g. a valid row with ``L[t, 0] = −inf``
       (``P_D P_G = 1``), which the missed-weight normalisation cannot represent.
+
+    **The Bethe estimate** of the log partition function at the beliefs ``β`` and the measurement
+    beliefs ``c_j``:
+
+    .. math::
+
+        \log Z_B = \sum_t L_{t0} + \sum_{t, j ≥ 1} β_{tj}(\log ψ_{tj} − \log β_{tj})
+        − \sum_t β_{t0}\log β_{t0} − \sum_j c_j \log c_j
+        + \sum_{t, j ≥ 1} (1 − β_{tj}) \log (1 − β_{tj})
+
+    (the Bethe free energy of the matching; the last term is minus the mutual information of the
+    track and measurement variables on each edge, cf. Vontobel 2013, "The Bethe permanent of a
+    nonnegative matrix", for the square case without misses).
     """
 
     num_iters: int = eqx.field(static=True, default=50)
