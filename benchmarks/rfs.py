@@ -16,7 +16,7 @@ The filter on both sides is the GM-PHD with ``P_S = 0.99``, ``P_D = 0.9``, clutt
 ``DistanceHypothesiser(KalmanPredictor, KalmanUpdater, Mahalanobis(), include_all=True)``,
 ``PHDUpdater`` and ``GaussianMixtureReducer``, the birth component joining the reduced mixture
 at each scan (as ``tests/test_gm_phd.py`` sets it up); jaxtrack's ``GMPHD(KalmanFilter(), ...,
-reduction="stonesoup", capacity=--capacity)``, which reproduces Stone Soup's updater and reducer.
+reduction=StoneSoupReduction(...), capacity=--capacity)``, which reproduces Stone Soup's updater and reducer.
 
 Timed:
 
@@ -82,6 +82,9 @@ from jaxtrack.models import LinearGaussianModel
 from jaxtrack.multitarget import (
     GMCPHD,
     GMPHD,
+    GaussianMixture,
+    StoneSoupReduction,
+    VoMaReduction,
     Scenario,
     run_cphd,
     run_phd,
@@ -142,16 +145,15 @@ def draw_scans(model, num_runs, num_scans, seed=0):
 
 
 def make_phd(model, capacity, reduction):
+    strategy = (StoneSoupReduction if reduction == "stonesoup" else VoMaReduction)(PRUNE, MERGE)
     return GMPHD(KalmanFilter(), model, prob_survival=P_S, prob_detect=P_D, clutter_density=KAPPA,
-                 birth_weights=[BIRTH_W], birth_means=[BIRTH_M], birth_covs=[BIRTH_P], capacity=capacity,
-                 prune_threshold=PRUNE, merge_threshold=MERGE, reduction=reduction)
+                 birth=GaussianMixture([BIRTH_W], [BIRTH_M], [BIRTH_P]), capacity=capacity, reduction=strategy)
 
 
 def make_cphd(model, capacity):
     return GMCPHD(KalmanFilter(), model, prob_survival=P_S, prob_detect=P_D, clutter_rate=CLUTTER_RATE,
-                  clutter_spatial_density=1.0 / AREA, birth_weights=[BIRTH_W], birth_means=[BIRTH_M],
-                  birth_covs=[BIRTH_P], capacity=capacity, max_cardinality=MAX_CARDINALITY,
-                  prune_threshold=PRUNE, merge_threshold=MERGE)
+                  clutter_spatial_density=1.0 / AREA, birth=GaussianMixture([BIRTH_W], [BIRTH_M], [BIRTH_P]),
+                  capacity=capacity, max_cardinality=MAX_CARDINALITY, reduction=VoMaReduction(PRUNE, MERGE))
 
 
 def timed(fn) -> float:

@@ -34,16 +34,15 @@ def scenario():
     return scen, settings
 
 
-def old_methods(scen, s):
-    """The five methods through the constructors as they were before the contract (0847afe)."""
+def methods(scen, s):
+    """The five methods (the constructors' current form; the reference was written with their
+    pre-contract keywords, ``birth_weights=…``, which build the same filters)."""
     from jaxtrack.association import JPDA
     from jaxtrack.filters import KalmanFilter
     from jaxtrack.multitarget import GMCPHD, GMPHD, PMB, PMBM, OnePointInitiator, Tracker, TrackManagement
 
     kf = KalmanFilter()
-    birth = dict(birth_weights=s.birth_weights, birth_means=s.birth_means, birth_covs=s.birth_covs)
-    initial = dict(initial_weights=s.initial_weights, initial_means=s.initial_means, initial_covs=s.initial_covs)
-    common = dict(prob_survival=s.prob_survival, prob_detect=s.prob_detect, **birth, **initial)
+    common = dict(prob_survival=s.prob_survival, prob_detect=s.prob_detect, birth=s.birth, initial=s.initial)
     mb = dict(clutter_density=s.clutter_density, max_tracks=24, gate=math.sqrt(20.0))
     initiator = OnePointInitiator(prior_mean=np.asarray(s.birth_means[0]), prior_cov=np.asarray(s.birth_covs[0]))
     return {
@@ -84,20 +83,21 @@ def _fields(obj, prefix=""):
 
 
 def old_outputs() -> dict:
-    """Every family's run and Monte Carlo through the pre-contract entry points."""
+    """Every family's run and Monte Carlo through the pre-contract entry points (as at 0847afe,
+    with the constructors' keywords of then)."""
     import warnings
 
     from jaxtrack.multitarget import run_cphd, run_phd, run_pmbm, run_tracker, simulate_scenario, tracker_monte_carlo
 
     scen, settings = scenario()
-    methods = old_methods(scen, settings)
+    all_methods = methods(scen, settings)
     truth = simulate_scenario(scen, RUN_KEY)
     z, v = truth.scans.measurements, truth.scans.valid
     runs = {"phd": run_phd, "cphd": run_cphd, "pmb": run_pmbm, "pmbm": run_pmbm, "jpda": run_tracker}
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for name, method in methods.items():
+        for name, method in all_methods.items():
             for key, value in _fields(runs[name](method, z, v, warn=False)).items():
                 out[f"{name}/run/{key}"] = value
             mc = tracker_monte_carlo(method, scen, MC_KEY, MC_RUNS, cutoff=CUTOFF, block_size=MC_RUNS)
@@ -118,3 +118,22 @@ if __name__ == "__main__":
     REFERENCE.parent.mkdir(exist_ok=True)
     np.savez_compressed(REFERENCE, **arrays)
     print(f"wrote {len(arrays)} arrays to {REFERENCE}")
+
+
+def new_style(kwargs: dict) -> dict:
+    """Constructor keywords in the tests' flat form (``birth_weights=…``, ``prune_threshold=…``,
+    ``reduction="stonesoup"``, ``poisson_*``) as the constructors take them now (``birth=``,
+    ``initial=`` GaussianMixtures, ``reduction=``/``poisson_reduction=`` strategies)."""
+    from jaxtrack.multitarget import GaussianMixture, StoneSoupReduction, VoMaReduction
+
+    kw = dict(kwargs)
+    for kind in ("birth", "initial"):
+        parts = [kw.pop(f"{kind}_{p}", None) for p in ("weights", "means", "covs")]
+        if any(p is not None for p in parts):
+            kw[kind] = GaussianMixture(*parts)
+    for prefix, key in (("", "reduction"), ("poisson_", "poisson_reduction")):
+        thresholds = {t: kw.pop(f"{prefix}{t}") for t in ("prune_threshold", "merge_threshold") if f"{prefix}{t}" in kw}
+        kind = kw.pop(key, None) if isinstance(kw.get(key), str) else None
+        if thresholds or kind is not None:
+            kw[key] = (StoneSoupReduction if kind == "stonesoup" else VoMaReduction)(**thresholds)
+    return kw

@@ -18,6 +18,7 @@ from scipy.special import gammainc
 from jaxtrack import InputError
 from jaxtrack.filters import KalmanFilter
 from jaxtrack.models import LinearGaussianModel
+from _multitarget_cases import new_style
 from jaxtrack.multitarget import GMCPHD, GMPHD, CapacityWarning, run_cphd, run_phd
 
 DT = 1.0
@@ -42,7 +43,7 @@ def _cphd(**kwargs):
             "birth_weights": [BIRTH_W], "birth_means": [B_MEAN], "birth_covs": [B_COV],
             "birth_cardinality": BIRTH_CARD, "capacity": CAPACITY, "max_cardinality": N_MAX,
             "prune_threshold": 0.0, "merge_threshold": 0.0}
-    return GMCPHD(KalmanFilter(), model, **{**args, **kwargs})
+    return GMCPHD(KalmanFilter(), model, **new_style({**args, **kwargs}))
 
 
 def _scans(points=SCANS):
@@ -156,9 +157,9 @@ def test_poisson_prediction_reduces_to_the_phd_update():
     z, valid = _scans([SCANS[1]])
     cphd = run_cphd(_cphd(birth_weights=[mu], birth_cardinality=None), z, valid, warn=False)
     model = LinearGaussianModel(F_CV, Q_CV, H_CV, R_CV, B_MEAN, B_COV)
-    phd = run_phd(GMPHD(KalmanFilter(), model, prob_survival=PS, prob_detect=PD, clutter_density=LAM * C,
-                        birth_weights=[mu], birth_means=[B_MEAN], birth_covs=[B_COV], capacity=CAPACITY,
-                        prune_threshold=0.0, merge_threshold=0.0), z, valid)
+    phd = run_phd(GMPHD(KalmanFilter(), model, **new_style(dict(
+        prob_survival=PS, prob_detect=PD, clutter_density=LAM * C, birth_weights=[mu], birth_means=[B_MEAN],
+        birth_covs=[B_COV], capacity=CAPACITY, prune_threshold=0.0, merge_threshold=0.0))), z, valid)
     act = np.asarray(phd.active[0])
     assert act.sum() == 5
     np.testing.assert_array_equal(np.asarray(cphd.active[0]), act)
@@ -188,9 +189,9 @@ def test_initial_intensity_is_a_poisson_start():
     z, valid = _scans([SCANS[0]])
     cphd = run_cphd(_cphd(birth_weights=[mu], birth_cardinality=None, **start), z, valid, warn=False)
     model = LinearGaussianModel(F_CV, Q_CV, H_CV, R_CV, B_MEAN, B_COV)
-    phd = run_phd(GMPHD(KalmanFilter(), model, prob_survival=PS, prob_detect=PD, clutter_density=LAM * C,
-                        birth_weights=[mu], birth_means=[B_MEAN], birth_covs=[B_COV], capacity=CAPACITY,
-                        prune_threshold=0.0, merge_threshold=0.0, **start), z, valid)
+    phd = run_phd(GMPHD(KalmanFilter(), model, **new_style(dict(
+        prob_survival=PS, prob_detect=PD, clutter_density=LAM * C, birth_weights=[mu], birth_means=[B_MEAN],
+        birth_covs=[B_COV], capacity=CAPACITY, prune_threshold=0.0, merge_threshold=0.0, **start))), z, valid)
     act = np.asarray(phd.active[0])
     assert act.sum() == 2 * (1 + len(SCANS[0]))  # the initial and the birth component, missed and per z
     np.testing.assert_array_equal(np.asarray(cphd.active[0]), act)
@@ -254,7 +255,7 @@ def test_gradient_matches_central_differences():
         ({"birth_cardinality": [0.5, 0.4]}, "birth_cardinality"),  # not a pmf
         ({"birth_cardinality": [0.5, 0.5]}, "birth_cardinality"),  # mean 0.5, birth mass 0.4
         ({"birth_cardinality": np.full(5, 0.2)}, "birth_cardinality"),  # longer than N_max + 1
-        ({"birth_means": [[0.0, 0.0]]}, "birth_means"),
+        ({"birth_means": [[0.0, 0.0]], "birth_covs": [np.eye(2)]}, "birth"),
         ({"capacity": 0}, "capacity"),
     ],
 )

@@ -17,7 +17,8 @@ import pytest
 from jaxtrack import InputError
 from jaxtrack.filters import KalmanFilter
 from jaxtrack.models import LinearGaussianModel
-from jaxtrack.multitarget import GMPHD, CapacityWarning, run_phd
+from _multitarget_cases import new_style
+from jaxtrack.multitarget import GMPHD, CapacityWarning, GaussianMixture, StoneSoupReduction, run_phd
 
 # ---------------------------------------------------------------- the Stone Soup scenario
 # Stone Soup's state order (x, vx, y, vy); its CV model with q = 0.3 m²/s³, dt = 1 s.
@@ -144,17 +145,15 @@ def test_equals_stonesoup_gm_phd(gate, initial):
     pytest.importorskip("stonesoup")
     z, valid, (F, Q, H, R) = _scenario()
     model = LinearGaussianModel(F, Q, H, R, SS_BIRTH_M, SS_BIRTH_P)
-    start = dict(initial_weights=SS_INITIAL_W, initial_means=SS_INITIAL_M, initial_covs=SS_INITIAL_P) if initial else {}
+    start = dict(initial=GaussianMixture(SS_INITIAL_W, SS_INITIAL_M, SS_INITIAL_P)) if initial else {}
     phd = GMPHD(KalmanFilter(), model, prob_survival=SS_PS, prob_detect=SS_PD, clutter_density=SS_KAPPA,
-                birth_weights=[SS_BIRTH_W], birth_means=[SS_BIRTH_M], birth_covs=[SS_BIRTH_P],
-                capacity=SS_CAPACITY, prune_threshold=SS_PRUNE, merge_threshold=SS_MERGE,
-                reduction="stonesoup", gate=np.inf if gate is None else gate, **start)
+                birth=GaussianMixture([SS_BIRTH_W], [SS_BIRTH_M], [SS_BIRTH_P]), capacity=SS_CAPACITY,
+                reduction=StoneSoupReduction(SS_PRUNE, SS_MERGE), gate=np.inf if gate is None else gate, **start)
     result = run_phd(phd, z, valid)
     assert not bool(result.overflow)
     if initial:  # the start matters: by the first scan both targets are held with weight ~1
         assert float(result.cardinality[0]) > 1.5
-        assert float(run_phd(eqx.tree_at(lambda f: (f.initial_weights, f.initial_means, f.initial_covs), phd,
-                                         (jnp.zeros((0,)), jnp.zeros((0, 4)), jnp.zeros((0, 4, 4)))),
+        assert float(run_phd(eqx.tree_at(lambda f: f.initial, phd, None, is_leaf=lambda x: x is None),
                              z, valid).cardinality[0]) < 1.0
     reference = _stonesoup_phd(z, valid, gate, initial)
     worst = {"weight": 0.0, "mean": 0.0, "cov": 0.0}
@@ -196,7 +195,7 @@ TWO_TARGETS = [[[2.0, -1.0], [-6.0, 4.0]], [[3.1, -0.8]], [[4.0, -0.5], [-7.5, 4
 
 def _small(**kwargs):
     model = LinearGaussianModel(F_CV, Q_CV, H_CV, R_CV, B_MEAN, B_COV)
-    return GMPHD(KalmanFilter(), model, **{**SMALL, **kwargs})
+    return GMPHD(KalmanFilter(), model, **new_style({**SMALL, **kwargs}))
 
 
 def _scans(points):
@@ -215,7 +214,7 @@ def _vo_ma_reference(z, valid, *, ps, pd, kappa, T, U, J_max):
     comps = []
     for k in range(z.shape[0]):
         pred = [(ps * w, F_CV @ m, F_CV @ P @ F_CV.T + Q_CV) for w, m, P in comps]
-        pred.append((SMALL["birth_weights"][0], B_MEAN, B_COV))
+        pred.append((SMALL['birth_weights'][0], B_MEAN, B_COV))
         out = [((1 - pd) * w, m, P) for w, m, P in pred]
         for zj in z[k][valid[k]]:
             terms = []
@@ -380,21 +379,44 @@ def test_fast_merge_equals_its_loop_form(reduction, capacity):
         ({"prob_detect": 1.5}, "prob_detect"),
         ({"prob_survival": 0.0}, "prob_survival"),
         ({"clutter_density": -1.0}, "clutter_density"),
-        ({"birth_means": [[0.0, 0.0]]}, "birth_means"),
-        ({"birth_weights": [-0.1]}, "birth_weights"),
-        ({"birth_covs": [-np.eye(4)]}, "birth_covs"),
+        ({"birth_means": [[0.0, 0.0]], "birth_covs": [np.eye(2)]}, "birth"),  # a 2-state mixture, 4-state model
         ({"capacity": 0}, "capacity"),
         ({"gate": 0.0}, "gate"),
-        ({"reduction": "greedy"}, "reduction"),
-        ({"initial_weights": [-0.1], "initial_means": [B_MEAN], "initial_covs": [B_COV]}, "initial_weights"),
-        ({"initial_weights": [0.5], "initial_means": [B_MEAN], "initial_covs": [-B_COV]}, "initial_covs"),
-        ({"initial_means": [B_MEAN]}, "initial_means"),
         ({"initial_weights": [0.1] * 9, "initial_means": [B_MEAN] * 9, "initial_covs": [B_COV] * 9}, "capacity"),
     ],
 )
 def test_bad_arguments_raise_input_error(kwargs, name):
     with pytest.raises(InputError, match=f"`{name}`"):
         _small(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "args, name",
+    [(([-0.1], [B_MEAN], [B_COV]), "weights"), (([0.1], [B_MEAN], [-B_COV]), "covs"),
+     (([0.1], [B_MEAN[:2]], [B_COV]), "covs"), (([0.1, 0.2], [B_MEAN], [B_COV]), "means"),
+     (([np.nan], [B_MEAN], [B_COV]), "weights")],
+)
+def test_a_bad_gaussian_mixture_names_its_argument(args, name):
+    with pytest.raises(InputError, match=f"`{name}`"):
+        GaussianMixture(*args)
+
+
+def test_the_former_keywords_still_build_the_same_filter_with_a_warning():
+    """``birth_weights=…``, ``prune_threshold=…``, ``reduction="stonesoup"`` (one release): a
+    DeprecationWarning naming the new form, and the same filter; a bad value names the old keyword."""
+    model = LinearGaussianModel(F_CV, Q_CV, H_CV, R_CV, B_MEAN, B_COV)
+    old = dict(SMALL, reduction="stonesoup", initial_weights=[0.5], initial_means=[B_MEAN], initial_covs=[B_COV])
+    with pytest.warns(DeprecationWarning, match="GaussianMixture|StoneSoupReduction"):
+        legacy = GMPHD(KalmanFilter(), model, **old)
+    new = GMPHD(KalmanFilter(), model, **new_style(old))
+    assert eqx.tree_equal(legacy, new)
+    assert isinstance(new.reduction, StoneSoupReduction) and float(new.reduction.prune_threshold) == 1e-12
+    with pytest.warns(DeprecationWarning), pytest.raises(InputError, match="`birth_weights`"):
+        GMPHD(KalmanFilter(), model, **dict(SMALL, birth_weights=[-0.1]))
+    with pytest.raises(InputError, match="`reduction`"):
+        GMPHD(KalmanFilter(), model, **dict(new_style(SMALL), reduction="greedy"))
+    with pytest.raises(InputError, match="unexpected keyword"):
+        GMPHD(KalmanFilter(), model, **dict(new_style(SMALL), prune_treshold=1e-3))
 
 
 def test_bad_scans_raise_input_error():

@@ -17,7 +17,7 @@ import jax
 import numpy as np
 import pytest
 
-from _multitarget_cases import CUTOFF, MC_KEY, MC_RUNS, REFERENCE, RUN_KEY, _fields, old_methods, scenario
+from _multitarget_cases import CUTOFF, MC_KEY, MC_RUNS, REFERENCE, RUN_KEY, _fields, methods, scenario
 from jaxtrack.multitarget import (
     AbstractMultiTargetFilter,
     MultiTargetMonteCarloResult,
@@ -37,7 +37,7 @@ RUNS = {"phd": run_phd, "cphd": run_cphd, "pmb": run_pmbm, "pmbm": run_pmbm, "jp
 def case():
     scen, settings = scenario()
     truth = simulate_scenario(scen, RUN_KEY)
-    return scen, old_methods(scen, settings), truth.scans.measurements, truth.scans.valid
+    return scen, methods(scen, settings), truth.scans.measurements, truth.scans.valid
 
 
 @pytest.fixture(scope="module")
@@ -169,3 +169,25 @@ def test_a_new_family_needs_only_the_four_methods(case):
 
 class _EchoInfo(NamedTuple):
     ok: jax.Array
+
+
+def test_the_former_monte_carlo_names_still_work_with_a_warning(case):
+    scen, methods, _, _ = case
+    import jaxtrack.multitarget as mt
+
+    with pytest.warns(DeprecationWarning, match="multitarget_monte_carlo"):
+        old = mt.tracker_monte_carlo
+    with pytest.warns(DeprecationWarning, match="MultiTargetMonteCarloResult"):
+        assert mt.TrackerMonteCarloResult is MultiTargetMonteCarloResult
+    with pytest.warns(DeprecationWarning, match="multitarget_monte_carlo"):
+        r_old = _quiet_but_deprecation(old, methods["jpda"], scen, MC_KEY, 2, cutoff=CUTOFF, block_size=2)
+    r_new = _quiet(multitarget_monte_carlo, methods["jpda"], scen, MC_KEY, 2, cutoff=CUTOFF, block_size=2)
+    np.testing.assert_array_equal(r_old.per_run_gospa, r_new.per_run_gospa)
+    assert r_old.births_dropped == r_new.capacity_events
+
+
+def _quiet_but_deprecation(fn, *args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        warnings.simplefilter("always", DeprecationWarning)
+        return fn(*args, **kwargs)

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from _multitarget_cases import RUN_KEY, old_methods, scenario
+from _multitarget_cases import RUN_KEY, methods, scenario
 from jaxtrack import InputError
 from jaxtrack.association import JPDA
 from jaxtrack.filters import KalmanFilter
@@ -40,7 +40,7 @@ def case():
     truth = simulate_scenario(scen, RUN_KEY)
     z = np.asarray(truth.scans.measurements)[:6]
     v = np.asarray(truth.scans.valid)[:6]
-    return scen, settings, old_methods(scen, settings), z, v
+    return scen, settings, methods(scen, settings), z, v
 
 
 def _with_nan(z, v):
@@ -86,8 +86,7 @@ def test_a_traced_bad_detection_probability_is_not_ok(case, bad):
 
 def test_zero_clutter_density_is_refused_by_the_phd_and_pmbm(case):
     scen, s, _, _, _ = case
-    common = dict(prob_survival=0.99, prob_detect=0.9, clutter_density=0.0, birth_weights=s.birth_weights,
-                  birth_means=s.birth_means, birth_covs=s.birth_covs)
+    common = dict(prob_survival=0.99, prob_detect=0.9, clutter_density=0.0, birth=s.birth)
     with pytest.raises(InputError, match="clutter_density"):
         GMPHD(KalmanFilter(), scen.model, capacity=8, **common)
     with pytest.raises(InputError, match="clutter_density"):

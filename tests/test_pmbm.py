@@ -22,6 +22,7 @@ from jaxtrack import InputError
 from jaxtrack.association import JPDA
 from jaxtrack.filters import KalmanFilter
 from jaxtrack.models import LinearGaussianModel
+from _multitarget_cases import new_style
 from jaxtrack.multitarget import PMB, PMBM, CapacityWarning, run_pmbm
 
 F_CV = np.array([[1, 1.0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 1.0], [0, 0, 0, 1.0]])
@@ -44,7 +45,7 @@ def _kwargs(**kw):
             "birth_means": [B_MEAN], "birth_covs": [B_COV], "initial_weights": [INIT_W], "initial_means": [B_MEAN],
             "initial_covs": [B_COV], "max_tracks": N_MAX, "existence_threshold": 0.0, "poisson_prune_threshold": 0.0,
             "poisson_merge_threshold": 0.0, "poisson_capacity": 8}
-    return {**args, **kw}
+    return new_style({**args, **kw})
 
 
 def _scans(points=SCANS):

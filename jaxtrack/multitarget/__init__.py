@@ -16,6 +16,8 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
 - ``_evaluation``: :func:`score_tracks` (GOSPA per scan, track counts) and
   :func:`multitarget_monte_carlo` (any method on a scenario through the Monte Carlo engine's run
   primitive; ``tracker_monte_carlo`` is its deprecated former name);
+- ``_mixture``: :class:`GaussianMixture` (birth and time-0 intensities of the four RFS filters)
+  and the mixture-reduction strategies :class:`VoMaReduction`, :class:`StoneSoupReduction`;
 - ``_phd``: :class:`GMPHD` (the Gaussian-mixture PHD filter of Vo & Ma 2006 with a fixed
   component budget) and :func:`run_phd`;
 - ``_cphd``: :class:`GMCPHD` (the Gaussian-mixture CPHD filter of Vo, Vo & Cantoni 2007: the
@@ -53,11 +55,15 @@ from ._base import (
 )
 from ._evaluation import (
     MultiTargetMonteCarloResult as MultiTargetMonteCarloResult,
-    TrackerMonteCarloResult as TrackerMonteCarloResult,
     TrackScores as TrackScores,
     multitarget_monte_carlo as multitarget_monte_carlo,
     score_tracks as score_tracks,
-    tracker_monte_carlo as tracker_monte_carlo,
+)
+from ._mixture import (
+    AbstractMixtureReduction as AbstractMixtureReduction,
+    GaussianMixture as GaussianMixture,
+    StoneSoupReduction as StoneSoupReduction,
+    VoMaReduction as VoMaReduction,
 )
 from ._learning import (
     DetectionClutterFit as DetectionClutterFit,
@@ -128,12 +134,14 @@ __all__ = [
     "run_multitarget",
     "MultiTargetMonteCarloResult",
     "multitarget_monte_carlo",
-    "TrackerMonteCarloResult",
     "TrackScores",
     "score_tracks",
-    "tracker_monte_carlo",
     "DetectionClutterFit",
     "fit_detection_and_clutter",
+    "GaussianMixture",
+    "AbstractMixtureReduction",
+    "VoMaReduction",
+    "StoneSoupReduction",
     "GMPHD",
     "GMPHDMixture",
     "GMPHDStepInfo",
@@ -151,3 +159,20 @@ __all__ = [
     "PMBMResult",
     "run_pmbm",
 ]
+
+
+_DEPRECATED = {"tracker_monte_carlo": "multitarget_monte_carlo", "TrackerMonteCarloResult": "MultiTargetMonteCarloResult"}
+
+
+def __getattr__(name: str):
+    """The former names of the Monte Carlo and its result (one release, with a DeprecationWarning)."""
+    if name in _DEPRECATED:
+        import warnings
+
+        from .. import _deprecation
+        from . import _evaluation
+
+        warnings.warn(f"`jaxtrack.multitarget.{name}` is deprecated: use `{_DEPRECATED[name]}`; it will be removed in "
+                      f"jaxtrack {_deprecation.REMOVED_IN}.", DeprecationWarning, stacklevel=2)
+        return getattr(_evaluation, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

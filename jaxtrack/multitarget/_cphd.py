@@ -51,15 +51,23 @@ from ._phd import (
     GMPHDMixture,
     _check_scans,
     _common_fields,
-    _initial_fields,
+    AbstractGaussianMixtureFilter,
+    _initial_mixture_checked,
     _initial_mixture,
     _pair_likelihoods,
     _predict_intensity,
     _scalar,
     _updated_layout,
 )
-from ._base import AbstractMultiTargetFilter, Estimates, scan_method, scan_ok, warn_capacity
-from ._reduction import _reduce_mixture
+from ._base import Estimates, scan_method, scan_ok, warn_capacity
+from ._mixture import (
+    AbstractMixtureReduction,
+    GaussianMixture,
+    VoMaReduction,
+    legacy_mixture,
+    legacy_reduction,
+    reject_unknown,
+)
 from ._scenario import CapacityWarning, _positive_int
 
 
@@ -193,13 +201,14 @@ class CPHDResult(eqx.Module):
 
 
 # ------------------------------------------------------------------------------ the filter
-class GMCPHD(AbstractMultiTargetFilter):
+class GMCPHD(AbstractGaussianMixtureFilter):
     r"""The GM-CPHD filter of Vo, Vo & Cantoni (2007) with fixed budgets ``J_max`` (components) and
     ``N_max`` (cardinality).
 
     **Arguments** (those shared with :class:`GMPHD` mean the same there: ``filter``, ``model``,
-    ``prob_survival``, ``prob_detect``, ``birth_weights``/``birth_means``/``birth_covs``,
-    ``capacity``, ``prune_threshold``, ``merge_threshold``, ``gate``, ``max_estimates``):
+    ``prob_survival``, ``prob_detect``, ``birth``, ``capacity``, ``reduction`` (Table II's
+    :class:`~jaxtrack.multitarget.VoMaReduction` only: Stone Soup's conventions are the GM-PHD's),
+    ``gate``, ``max_estimates``):
 
     - ``max_cardinality``: ``N_max``, the largest number of targets the cardinality pmf holds (static).
     - ``clutter_rate``: ``λ``, the Poisson mean number of clutter points per scan, ``>= 0``.
@@ -207,15 +216,16 @@ class GMCPHD(AbstractMultiTargetFilter):
       ``> 0``; or instead ``clutter_density``: ``κ = λ c`` as the GM-PHD takes it (needs ``λ > 0``).
       Exactly one of the two.
     - ``birth_cardinality``: ``p_Γ(n)``, ``n = 0..L−1`` with ``L <= N_max + 1``, summing to 1 with
-      mean ``Σ birth_weights`` (an i.i.d. cluster birth); default: Poisson with mean
-      ``Σ birth_weights`` (its mass above ``N_max`` counts as truncated at every scan).
+      mean ``Σ birth.weights`` (an i.i.d. cluster birth); default: Poisson with mean
+      ``Σ birth.weights`` (its mass above ``N_max`` counts as truncated at every scan).
     - ``truncation_tolerance``: the predicted mass above ``N_max`` per scan beyond which
       :func:`run_cphd` warns (default 1e-9).
-    - ``initial_weights``/``initial_means``/``initial_covs``: the intensity before the first scan,
+    - ``initial``: the intensity before the first scan (a :class:`~jaxtrack.multitarget.GaussianMixture`),
       as :class:`GMPHD`'s, taken as a Poisson RFS (cardinality Poisson with mean
-      ``Σ initial_weights``; see :meth:`init`); default none: no target before the first births.
+      ``Σ initial.weights``; see :meth:`init`); default None: no target before the first births.
+    - Deprecated (one release): ``birth_*``, ``initial_*``, ``prune_threshold``, ``merge_threshold``.
 
-    Reduction is the GM-PHD's ``"vo-ma"`` (Vo & Ma 2006, Table II). The estimated number of targets
+    The estimated number of targets
     is the MAP of the cardinality pmf; the estimates are the means of that many heaviest components.
 
     ``P_S``, ``P_D``, ``λ``, ``c``, the birth mixture and cardinality are array leaves: changing
@@ -231,8 +241,7 @@ class GMCPHD(AbstractMultiTargetFilter):
 
         cphd = GMCPHD(KalmanFilter(), model, prob_survival=0.99, prob_detect=0.9,
                       clutter_rate=10.0, clutter_spatial_density=1 / 200.0**2,
-                      birth_weights=[0.1], birth_means=[m_b], birth_covs=[P_b],
-                      capacity=50, max_cardinality=30)
+                      birth=GaussianMixture([0.1], [m_b], [P_b]), capacity=50, max_cardinality=30)
         result = run_cphd(cphd, scans.measurements, scans.valid)
         result.cardinality_pmf      # (T, 31)
         result.estimates[k][result.estimate_mask[k]]        # scan k's MAP-many target states
@@ -254,22 +263,16 @@ class GMCPHD(AbstractMultiTargetFilter):
     prob_detect: Float[Array, ""]
     clutter_rate: Float[Array, ""]
     clutter_spatial_density: Float[Array, ""]
-    birth_weights: Float[Array, " B"]
-    birth_means: Float[Array, "B n"]
-    birth_covs: Float[Array, "B n n"]
+    birth: GaussianMixture
     birth_cardinality: Float[Array, " N1"]
     birth_tail: Float[Array, ""]
-    initial_weights: Float[Array, " J0"]
-    initial_means: Float[Array, "J0 n"]
-    initial_covs: Float[Array, "J0 n n"]
-    prune_threshold: Float[Array, ""]
-    merge_threshold: Float[Array, ""]
+    initial: GaussianMixture | None
+    reduction: AbstractMixtureReduction
     truncation_tolerance: Float[Array, ""]
     gate: Float[Array, ""]
     capacity: int = eqx.field(static=True)
     max_cardinality: int = eqx.field(static=True)
     max_estimates: int = eqx.field(static=True)
-    reduction: str = eqx.field(static=True, default="vo-ma")
     labelled: ClassVar[bool] = False
 
     def __init__(
@@ -280,27 +283,30 @@ class GMCPHD(AbstractMultiTargetFilter):
         prob_survival: ArrayLike,
         prob_detect: ArrayLike,
         clutter_rate: ArrayLike,
-        birth_weights: ArrayLike,
-        birth_means: ArrayLike,
-        birth_covs: ArrayLike,
+        birth: GaussianMixture | None = None,
         capacity: int,
         max_cardinality: int,
         clutter_spatial_density: ArrayLike | None = None,
         clutter_density: ArrayLike | None = None,
         birth_cardinality: ArrayLike | None = None,
-        prune_threshold: ArrayLike = 1e-5,
-        merge_threshold: ArrayLike = 4.0,
+        reduction: VoMaReduction | None = None,
         truncation_tolerance: ArrayLike = 1e-9,
         gate: ArrayLike = math.inf,
         max_estimates: int | None = None,
-        initial_weights: ArrayLike | None = None,
-        initial_means: ArrayLike | None = None,
-        initial_covs: ArrayLike | None = None,
+        initial: GaussianMixture | None = None,
+        **deprecated,
     ):
+        n = model.state_dim if isinstance(model, AbstractStateSpaceModel) else 0
+        birth = legacy_mixture("birth", deprecated, birth, n, required=True)
+        initial = legacy_mixture("initial", deprecated, initial, n, required=False)
+        reduction = legacy_reduction(deprecated, reduction, allow_string=False)
+        reject_unknown("GMCPHD", deprecated)
+        if reduction.stonesoup_update:
+            raise InputError("`reduction` must be a VoMaReduction for the GM-CPHD (Stone Soup's conventions are "
+                             "its GM-PHD's).")
         fields = _common_fields(
-            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth_weights=birth_weights,
-            birth_means=birth_means, birth_covs=birth_covs, capacity=capacity, prune_threshold=prune_threshold,
-            merge_threshold=merge_threshold, gate=gate, max_estimates=max_estimates,
+            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth=birth, capacity=capacity,
+            reduction=reduction, gate=gate, max_estimates=max_estimates,
         )
         for name, value in fields.items():  # no extraction threshold: the CPHD extracts by MAP cardinality
             setattr(self, name, value)
@@ -334,10 +340,7 @@ class GMCPHD(AbstractMultiTargetFilter):
                                      f"intensity's mass Σ birth_weights is {float(mu)} (they must agree).")
             self.birth_cardinality = jnp.zeros((N + 1,), pg.dtype).at[: pg.shape[0]].set(pg)
             self.birth_tail = jnp.zeros((), pg.dtype)
-        self.reduction = "vo-ma"
-        for name, value in _initial_fields(initial_weights, initial_means, initial_covs, model.state_dim,
-                                           self.capacity, "capacity").items():
-            setattr(self, name, value)
+        self.initial = _initial_mixture_checked(initial, model.state_dim, self.capacity, "capacity")
 
     # ------------------------------------------------------------------------------------------
     def init(self) -> CPHDState:
@@ -439,7 +442,8 @@ class GMCPHD(AbstractMultiTargetFilter):
         w, m, P, active, pmf, ok = self.update(predicted, predicted_pmf, measurements, valid, mixture.step)
         ok = ok & scan_ok(measurements, valid)
         updated_mass = jnp.sum(jnp.where(active, w, 0.0))
-        w, m, P, active, n_drop, w_drop, n_pruned = _reduce_mixture(self, w, m, P, active)
+        w, m, P, active, n_drop, w_drop, n_pruned = self.reduction(w, m, P, active, self.capacity,
+                                                                   self.birth_means[0], self.birth_covs[0])
         new_mixture = GMPHDMixture(w, m, P, active, mixture.step + 1, mixture.num_dropped + n_drop,
                                    mixture.dropped_weight + w_drop)
         new = CPHDState(new_mixture, pmf, state.truncated_mass + truncated, state.ok & ok)

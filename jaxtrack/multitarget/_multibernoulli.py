@@ -10,7 +10,6 @@ Aerosp. Electron. Syst. 54(4), 1883-1901 (G18), described in :mod:`._pmbm`.
 
 from __future__ import annotations
 
-import types
 import warnings
 from typing import ClassVar, NamedTuple
 
@@ -21,9 +20,19 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
-from ._base import AbstractMultiTargetFilter, Estimates, scan_method, scan_ok
-from ._phd import _check_scans, _common_fields, _in_slots, _initial_fields, _pair_likelihoods, _scalar
-from ._reduction import _reduce_mixture
+from ._base import Estimates, scan_method, scan_ok
+from ..filters._base import AbstractFilter
+from ..models._base import AbstractStateSpaceModel
+from ._mixture import AbstractMixtureReduction, GaussianMixture, legacy_mixture, legacy_reduction, reject_unknown
+from ._phd import (
+    AbstractGaussianMixtureFilter,
+    _check_scans,
+    _common_fields,
+    _in_slots,
+    _initial_mixture_checked,
+    _pair_likelihoods,
+    _scalar,
+)
 from ._scenario import CapacityWarning, _positive_int
 
 class PMBMState(eqx.Module):
@@ -126,42 +135,36 @@ def _hypothesis_existence_sums(state):
 # placement of new tracks, estimates.
 
 
-def _mb_fields(filter, model, *, prob_survival, prob_detect, clutter_density, birth_weights, birth_means,
-               birth_covs, initial_weights, initial_means, initial_covs, poisson_capacity, max_tracks,
-               poisson_prune_threshold, poisson_merge_threshold, existence_threshold, estimation_threshold,
-               gate) -> dict:
-    """The checked fields of :class:`PMBM` and :class:`~jaxtrack.multitarget.PMB` (as documented there)."""
+def _mb_fields(filter, model, *, prob_survival, prob_detect, clutter_density, birth, initial, poisson_capacity,
+               max_tracks, poisson_reduction, existence_threshold, estimation_threshold, gate, deprecated: dict,
+               cls: str) -> dict:
+    """The checked fields of :class:`PMBM` and :class:`~jaxtrack.multitarget.PMB` (as documented
+    there); ``deprecated`` holds the former keywords (``birth_*``, ``initial_*``,
+    ``poisson_prune_threshold``, ``poisson_merge_threshold``)."""
+    n = model.state_dim if isinstance(model, AbstractStateSpaceModel) else 0
+    birth = legacy_mixture("birth", deprecated, birth, n, required=True)
+    initial = legacy_mixture("initial", deprecated, initial, n, required=False)
+    poisson_reduction = legacy_reduction(deprecated, poisson_reduction, prefix="poisson_", allow_string=False)
+    reject_unknown(cls, deprecated)
     base = _common_fields(
-        filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth_weights=birth_weights,
-        birth_means=birth_means, birth_covs=birth_covs, capacity=poisson_capacity,
-        prune_threshold=poisson_prune_threshold, merge_threshold=poisson_merge_threshold, gate=gate,
-        max_estimates=None,
+        filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth=birth, capacity=poisson_capacity,
+        reduction=poisson_reduction, gate=gate, max_estimates=None,
     )
-    initial = _initial_fields(initial_weights, initial_means, initial_covs, model.state_dim, base["capacity"],
-                              "poisson_capacity", default=(base["birth_weights"], base["birth_means"], base["birth_covs"]))
+    # G18's prior is the Poisson intensity the first scan updates; by default the birth intensity.
+    initial = _initial_mixture_checked(base["birth"] if initial is None else initial, model.state_dim,
+                                       base["capacity"], "poisson_capacity")
     return {
         "filter": base["filter"], "model": base["model"], "prob_survival": base["prob_survival"],
         "prob_detect": base["prob_detect"],
         # κ = 0 would make a measurement no Poisson component or track reaches impossible (its new
         # track's weight log(e + κ) = −inf, an infeasible assignment): refused, as the PMB always did.
         "clutter_density": _scalar("clutter_density", clutter_density, low=0.0, open_low=True),
-        "birth_weights": base["birth_weights"], "birth_means": base["birth_means"], "birth_covs": base["birth_covs"],
-        **initial,
+        "birth": base["birth"], "initial": initial, "poisson_reduction": poisson_reduction,
         "poisson_capacity": base["capacity"], "max_tracks": _positive_int("max_tracks", max_tracks),
-        "poisson_prune_threshold": base["prune_threshold"], "poisson_merge_threshold": base["merge_threshold"],
         "existence_threshold": _scalar("existence_threshold", existence_threshold, low=0.0, high=1.0),
         "estimation_threshold": _scalar("estimation_threshold", estimation_threshold, low=0.0, high=1.0),
         "gate": base["gate"],
     }
-
-
-def _poisson_view(f):
-    """The fields the GM-PHD's reduction and likelihoods read, under their GM-PHD names."""
-    return types.SimpleNamespace(
-        filter=f.filter, model=f.model, gate=f.gate, prune_threshold=f.poisson_prune_threshold,
-        merge_threshold=f.poisson_merge_threshold, reduction="vo-ma", capacity=f.poisson_capacity,
-        birth_means=f.birth_means, birth_covs=f.birth_covs,
-    )
 
 
 def _init_state(f, H: int) -> PMBMState:
@@ -193,13 +196,13 @@ def _predict(f, state: PMBMState) -> PMBMState:
     """G18 Sec. IV-A (Theorem 1 for the Poisson part): survival and births, then the Poisson
     reduction into ``poisson_capacity`` slots."""
     k = state.step
-    pv = _poisson_view(f)
     pm, pc = jax.vmap(lambda x, P: f.filter.predict(f.model, x, P, k))(state.poisson_means, state.poisson_covs)
     w = jnp.concatenate([f.prob_survival * jnp.where(state.poisson_active, state.poisson_weights, 0.0), f.birth_weights])
     m = jnp.concatenate([pm, f.birth_means])
     P = jnp.concatenate([pc, f.birth_covs])
     act = jnp.concatenate([state.poisson_active, jnp.ones(f.birth_weights.shape, bool)])
-    w, m, P, act, n_drop, w_drop, _ = _reduce_mixture(pv, w, m, P, act)
+    w, m, P, act, n_drop, w_drop, _ = f.poisson_reduction(w, m, P, act, f.poisson_capacity, f.birth_means[0],
+                                                          f.birth_covs[0])
     N, H, n = state.means.shape
     tm, tc = jax.vmap(lambda x, P: f.filter.predict(f.model, x, P, k))(
         state.means.reshape(N * H, n), state.covs.reshape(N * H, n, n))
@@ -223,8 +226,7 @@ def _new_tracks(f, state, z, valid, k):
     """The Poisson part's update (G18 Theorem 2, eqs. (27)-(29), (33)): for every measurement ``j``
     the Bernoulli of its new track ``(r_j, mean_j, cov_j)``, its log weight ``log(e_j + κ)`` and
     the undetected intensity ``(1 − P_D) w``."""
-    pv = _poisson_view(f)
-    loglik, pair, cond = _pair_likelihoods(pv, state.poisson_means, state.poisson_covs, state.poisson_active, z, valid, k)
+    loglik, pair, cond = _pair_likelihoods(f, state.poisson_means, state.poisson_covs, state.poisson_active, z, valid, k)
     logw = jnp.log(jnp.where(state.poisson_active, state.poisson_weights, 1.0))
     la = jnp.where(pair, jnp.log(f.prob_detect) + logw[:, None] + loglik, -jnp.inf)  # (J, M)
     a_max = jnp.max(la, axis=0)
@@ -367,24 +369,19 @@ def _finish(f, state, *, existence, means, covs, local_active, table, log_w, hyp
 
 
 
-class AbstractMultiBernoulliFilter(AbstractMultiTargetFilter):
+class AbstractMultiBernoulliFilter(AbstractGaussianMixtureFilter):
     """What the PMBM (:class:`~jaxtrack.multitarget.PMBM`) and the PMB
     (:class:`~jaxtrack.multitarget.PMB`) share: the configuration fields (documented on each) and
     every step but the update, which each implements (ranked hypotheses, or association marginals)."""
 
-    filter: object
-    model: object
+    filter: AbstractFilter
+    model: AbstractStateSpaceModel
     prob_survival: Float[Array, ""]
     prob_detect: Float[Array, ""]
     clutter_density: Float[Array, ""]
-    birth_weights: Float[Array, " B"]
-    birth_means: Float[Array, "B n"]
-    birth_covs: Float[Array, "B n n"]
-    initial_weights: Float[Array, " B0"]
-    initial_means: Float[Array, "B0 n"]
-    initial_covs: Float[Array, "B0 n n"]
-    poisson_prune_threshold: Float[Array, ""]
-    poisson_merge_threshold: Float[Array, ""]
+    birth: GaussianMixture
+    initial: GaussianMixture
+    poisson_reduction: AbstractMixtureReduction
     existence_threshold: Float[Array, ""]
     estimation_threshold: Float[Array, ""]
     gate: Float[Array, ""]

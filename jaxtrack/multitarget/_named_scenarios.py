@@ -20,6 +20,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._validation import InputError, as_key
 from ..models import ConstantVelocity, RangeBearing, TrackingModel, constant_velocity
+from ._mixture import GaussianMixture
 from ._scenario import Scenario, _positive_int
 
 __all__ = ["Williams15Settings", "crossing_targets", "williams15"]
@@ -75,6 +76,16 @@ class Williams15Settings(eqx.Module):
     gospa_order: float = eqx.field(static=True)
     gospa_alpha: float = eqx.field(static=True)
     num_runs: int = eqx.field(static=True)
+
+    @property
+    def birth(self) -> GaussianMixture:
+        """The birth intensity as the filters take it (``birth=``)."""
+        return GaussianMixture(self.birth_weights, self.birth_means, self.birth_covs)
+
+    @property
+    def initial(self) -> GaussianMixture:
+        """The time-0 intensity as the filters take it (``initial=``)."""
+        return GaussianMixture(self.initial_weights, self.initial_means, self.initial_covs)
 
 
 def williams15(key: PRNGKeyArray | int = 0, *, max_measurements: int = 40) -> tuple[Scenario, Williams15Settings]:

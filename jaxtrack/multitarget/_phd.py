@@ -23,7 +23,7 @@ Everything has a static shape, so :func:`run_phd` is one jitted ``lax.scan`` and
 differentiable in ``P_D``, ``P_S``, ``κ`` and the birth weights wherever the reduction's discrete
 choices (prune, merge, seed order) do not flip: they are piecewise constant.
 
-``reduction="stonesoup"`` reproduces Stone Soup's ``PHDUpdater`` + ``GaussianMixtureReducer``
+``reduction=StoneSoupReduction()`` reproduces Stone Soup's ``PHDUpdater`` + ``GaussianMixtureReducer``
 (``stonesoup/updater/pointprocess.py``, ``stonesoup/mixturereducer/gaussianmixture.py``), which
 differ from Tables I-II in five places:
 
@@ -50,7 +50,6 @@ from typing import ClassVar, NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
@@ -58,10 +57,17 @@ from ..association._gating import measurement_likelihoods
 from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
 from ._base import AbstractMultiTargetFilter, Estimates, check_scans, scan_method, scan_ok, warn_capacity, warn_not_ok
-from ._reduction import _reduce_mixture
+from ._mixture import (
+    AbstractMixtureReduction,
+    GaussianMixture,
+    check_mixture,
+    empty_mixture,
+    legacy_mixture,
+    legacy_reduction,
+    reject_unknown,
+)
 from ._scenario import _positive_int
 
-_REDUCTIONS = ("vo-ma", "stonesoup")
 
 
 class GMPHDMixture(eqx.Module):
@@ -128,48 +134,18 @@ def _scalar(name, value, *, low, high=None, open_low=False):
     return x
 
 
-def _mixture_arrays(what: str, weights, means, covs, n: int) -> tuple[Array, Array, Array]:
-    """``({what}_weights (B,), {what}_means (B, n), {what}_covs (B, n, n))`` checked: shapes, finite
-    non-negative weights, symmetric positive definite covariances (errors name the argument)."""
-    w, m, c = (jnp.asarray(a, float) for a in (weights, means, covs))
-    if w.ndim != 1 or w.shape[0] < 1:
-        raise InputError(f"`{what}_weights` must have shape (B,) with B >= 1; got {w.shape}.")
-    B = w.shape[0]
-    if m.shape != (B, n):
-        raise InputError(f"`{what}_means` must have shape ({B}, {n}) (B components, the model's n states); "
-                         f"got {m.shape}.")
-    if c.shape != (B, n, n):
-        raise InputError(f"`{what}_covs` must have shape ({B}, {n}, {n}); got {c.shape}.")
-    if is_concrete(w) and not (np.all(np.asarray(w) >= 0.0) and np.all(np.isfinite(np.asarray(w)))):
-        raise InputError(f"`{what}_weights` must be finite and >= 0; got {np.asarray(w)}.")
-    if is_concrete(c):
-        cc = np.asarray(c)
-        if not np.all(np.isfinite(cc)) or not np.allclose(cc, np.swapaxes(cc, -1, -2), rtol=1e-8, atol=0.0):
-            raise InputError(f"`{what}_covs` must be finite and symmetric.")
-        if np.any(np.linalg.eigvalsh(cc) <= 0.0):
-            raise InputError(f"`{what}_covs` must be positive definite.")
-    return w, m, c
+def _initial_mixture_checked(initial, n: int, capacity: int, capacity_name: str) -> GaussianMixture | None:
+    """The time-0 intensity (a :class:`GaussianMixture` or None), which must fit in ``capacity`` slots."""
+    initial = check_mixture("initial", initial, n, optional=True)
+    if initial is not None and initial.num_components > capacity:
+        raise InputError(f"`{capacity_name}` ({capacity}) must hold the {initial.num_components} initial components.")
+    return initial
 
 
-def _initial_fields(initial_weights, initial_means, initial_covs, n: int, capacity: int, capacity_name: str,
-                    default=None) -> dict:
-    """The checked time-0 intensity (``initial_*``; when not given: ``default``, a ``(w, m, P)``
-    triple, or no component) that must fit in ``capacity`` slots."""
-    if initial_weights is None:
-        if initial_means is not None or initial_covs is not None:
-            raise InputError("`initial_means` and `initial_covs` need `initial_weights`.")
-        w, m, c = default if default is not None else (jnp.zeros((0,)), jnp.zeros((0, n)), jnp.zeros((0, n, n)))
-    else:
-        w, m, c = _mixture_arrays("initial", initial_weights, initial_means, initial_covs, n)
-    if w.shape[0] > capacity:
-        raise InputError(f"`{capacity_name}` ({capacity}) must hold the {w.shape[0]} initial components.")
-    return {"initial_weights": w, "initial_means": m, "initial_covs": c}
-
-
-def _common_fields(filter, model, *, prob_survival, prob_detect, birth_weights, birth_means, birth_covs,
-                   capacity, prune_threshold, merge_threshold, gate, max_estimates) -> dict:
-    """The checked fields shared by :class:`GMPHD` and :class:`~jaxtrack.multitarget.GMCPHD`
-    (each argument as documented there), as a dict of attribute name to value."""
+def _common_fields(filter, model, *, prob_survival, prob_detect, birth, capacity, reduction, gate,
+                   max_estimates) -> dict:
+    """The checked fields shared by the Gaussian-mixture filters (each argument as documented on
+    :class:`GMPHD`), as a dict of attribute name to value."""
     if not isinstance(filter, AbstractFilter):
         raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
     if filter.square_root:
@@ -179,7 +155,6 @@ def _common_fields(filter, model, *, prob_survival, prob_detect, birth_weights, 
     filter.check_model(model)
     capacity = _positive_int("capacity", capacity)  # mixture slots
     max_estimates = capacity if max_estimates is None else _positive_int("max_estimates", max_estimates)
-    bw, bm, bc = _mixture_arrays("birth", birth_weights, birth_means, birth_covs, model.state_dim)
     # A leaf, not a static field: gated and ungated filters share one compiled program.
     gate_ = jnp.asarray(gate, float)
     if gate_.shape != () or (is_concrete(gate_) and not float(gate_) > 0.0):
@@ -188,11 +163,49 @@ def _common_fields(filter, model, *, prob_survival, prob_detect, birth_weights, 
         "filter": filter, "model": model,
         "prob_survival": _scalar("prob_survival", prob_survival, low=0.0, high=1.0, open_low=True),
         "prob_detect": _scalar("prob_detect", prob_detect, low=0.0, high=1.0, open_low=True),
-        "prune_threshold": _scalar("prune_threshold", prune_threshold, low=0.0),
-        "merge_threshold": _scalar("merge_threshold", merge_threshold, low=0.0),
-        "birth_weights": bw, "birth_means": bm, "birth_covs": bc, "capacity": int(capacity), "gate": gate_,
-        "max_estimates": int(max_estimates),
+        "birth": check_mixture("birth", birth, model.state_dim), "reduction": reduction,
+        "capacity": int(capacity), "gate": gate_, "max_estimates": int(max_estimates),
     }
+
+
+class AbstractGaussianMixtureFilter(AbstractMultiTargetFilter):
+    """What the Gaussian-mixture filters (GM-PHD, GM-CPHD, PMB, PMBM) share: a birth intensity, an
+    optional time-0 intensity (:class:`GaussianMixture`), and the single-target filter and model
+    every component follows. The ``birth_*``/``initial_*`` properties are their arrays (the
+    time-0 one empty, ``(0, …)``, when there is none)."""
+
+    filter: eqx.AbstractVar[AbstractFilter]
+    birth: eqx.AbstractVar[GaussianMixture]
+    initial: eqx.AbstractVar[GaussianMixture | None]
+
+    @property
+    def birth_weights(self) -> Float[Array, " B"]:
+        return self.birth.weights
+
+    @property
+    def birth_means(self) -> Float[Array, "B n"]:
+        return self.birth.means
+
+    @property
+    def birth_covs(self) -> Float[Array, "B n n"]:
+        return self.birth.covs
+
+    def _initial_arrays(self):
+        if self.initial is None:
+            return empty_mixture(self.model.state_dim)
+        return self.initial.weights, self.initial.means, self.initial.covs
+
+    @property
+    def initial_weights(self) -> Float[Array, " J0"]:
+        return self._initial_arrays()[0]
+
+    @property
+    def initial_means(self) -> Float[Array, "J0 n"]:
+        return self._initial_arrays()[1]
+
+    @property
+    def initial_covs(self) -> Float[Array, "J0 n n"]:
+        return self._initial_arrays()[2]
 
 
 def _empty_mixture(f) -> GMPHDMixture:
@@ -269,7 +282,7 @@ def _check_scans(measurements, valid, meas_dim):
     return check_scans(measurements, valid, meas_dim)
 
 
-class GMPHD(AbstractMultiTargetFilter):
+class GMPHD(AbstractGaussianMixtureFilter):
     r"""The GM-PHD filter of Vo & Ma (2006) with a fixed component budget ``J_max``.
 
     **Arguments:**
@@ -282,21 +295,23 @@ class GMPHD(AbstractMultiTargetFilter):
     - ``clutter_density``: ``κ``, clutter points per unit measurement-space volume per scan
       (e.g. per m² for positions), ``> 0`` and finite (0 would make a measurement that no
       component reaches 0/0: use a small positive value for an almost clutter-free sensor).
-    - ``birth_weights`` ``(B,)`` (expected births per scan, each ``>= 0``), ``birth_means``
-      ``(B, n)``, ``birth_covs`` ``(B, n, n)``: the birth intensity ``γ_k``.
+    - ``birth``: the birth intensity ``γ_k``, a :class:`~jaxtrack.multitarget.GaussianMixture`
+      (weights: expected births per scan).
     - ``capacity``: ``J_max``, the number of mixture slots after reduction (static).
-    - ``prune_threshold``: ``T`` (default 1e-5); ``merge_threshold``: ``U``, a squared
-      Mahalanobis distance (default 4); ``extraction_threshold``: the weight above which a
-      component is reported as a target (default 0.5, Table III).
+    - ``reduction``: the mixture-reduction strategy: :class:`~jaxtrack.multitarget.VoMaReduction`
+      (default: Table II with ``T`` = 1e-5, ``U`` = 4) or
+      :class:`~jaxtrack.multitarget.StoneSoupReduction` (Stone Soup's conventions, module
+      docstring). ``extraction_threshold``: the weight above which a component is reported as a
+      target (default 0.5, Table III).
     - ``gate``: optional Mahalanobis distance ``sqrt(yᵀS⁻¹y)`` beyond which a measurement does not
       update a component (Stone Soup's ``DistanceHypothesiser(missed_distance=...)``); default
       ``inf``: no gate, as in Vo & Ma.
-    - ``reduction``: ``"vo-ma"`` (default, Table II) or ``"stonesoup"`` (the differences are in the
-      module docstring).
     - ``max_estimates``: the static number of estimate slots (default ``capacity``).
-    - ``initial_weights`` ``(J0,)``, ``initial_means`` ``(J0, n)``, ``initial_covs`` ``(J0, n, n)``:
-      the intensity before the first scan (``J0 <= capacity``; default none: no target before the
-      first births), e.g. the Poisson prior a PMB/PMBM filter starts from (its ``initial_*``).
+    - ``initial``: the intensity before the first scan, a :class:`~jaxtrack.multitarget.GaussianMixture`
+      of ``J0 <= capacity`` components (default None: no target before the first births), e.g. the
+      Poisson prior a PMB/PMBM filter starts from (its ``initial``).
+    - Deprecated (one release): ``birth_weights``/``birth_means``/``birth_covs``,
+      ``initial_*``, ``prune_threshold``/``merge_threshold`` and a string ``reduction``.
 
     ``P_S``, ``P_D``, ``κ``, the birth and initial mixtures, the thresholds and the gate are array leaves
     (differentiable, and changing them does not recompile :func:`run_phd`).
@@ -310,8 +325,7 @@ class GMPHD(AbstractMultiTargetFilter):
 
         model = constant_velocity(...)                      # any LinearGaussianModel
         phd = GMPHD(KalmanFilter(), model, prob_survival=0.99, prob_detect=0.9,
-                    clutter_density=1e-4, birth_weights=[0.1], birth_means=[m_b],
-                    birth_covs=[P_b], capacity=50)
+                    clutter_density=1e-4, birth=GaussianMixture([0.1], [m_b], [P_b]), capacity=50)
         result = run_phd(phd, scans.measurements, scans.valid)
         result.cardinality          # (T,) expected number of targets
         result.estimates[k][result.estimate_mask[k]]        # scan k's target states
@@ -332,18 +346,12 @@ class GMPHD(AbstractMultiTargetFilter):
     prob_survival: Float[Array, ""]
     prob_detect: Float[Array, ""]
     clutter_density: Float[Array, ""]
-    birth_weights: Float[Array, " B"]
-    birth_means: Float[Array, "B n"]
-    birth_covs: Float[Array, "B n n"]
-    initial_weights: Float[Array, " J0"]
-    initial_means: Float[Array, "J0 n"]
-    initial_covs: Float[Array, "J0 n n"]
-    prune_threshold: Float[Array, ""]
-    merge_threshold: Float[Array, ""]
+    birth: GaussianMixture
+    initial: GaussianMixture | None
+    reduction: AbstractMixtureReduction
     extraction_threshold: Float[Array, ""]
     capacity: int = eqx.field(static=True)
     gate: Float[Array, ""]
-    reduction: str = eqx.field(static=True)
     max_estimates: int = eqx.field(static=True)
     labelled: ClassVar[bool] = False
 
@@ -355,36 +363,30 @@ class GMPHD(AbstractMultiTargetFilter):
         prob_survival: ArrayLike,
         prob_detect: ArrayLike,
         clutter_density: ArrayLike,
-        birth_weights: ArrayLike,
-        birth_means: ArrayLike,
-        birth_covs: ArrayLike,
+        birth: GaussianMixture | None = None,
         capacity: int,
-        prune_threshold: ArrayLike = 1e-5,
-        merge_threshold: ArrayLike = 4.0,
+        reduction: AbstractMixtureReduction | None = None,
         extraction_threshold: ArrayLike = 0.5,
         gate: ArrayLike = math.inf,
-        reduction: str = "vo-ma",
         max_estimates: int | None = None,
-        initial_weights: ArrayLike | None = None,
-        initial_means: ArrayLike | None = None,
-        initial_covs: ArrayLike | None = None,
+        initial: GaussianMixture | None = None,
+        **deprecated,
     ):
-        if reduction not in _REDUCTIONS:
-            raise InputError(f"`reduction` must be one of {_REDUCTIONS}; got {reduction!r}.")
+        n = model.state_dim if isinstance(model, AbstractStateSpaceModel) else 0
+        birth = legacy_mixture("birth", deprecated, birth, n, required=True)
+        initial = legacy_mixture("initial", deprecated, initial, n, required=False)
+        reduction = legacy_reduction(deprecated, reduction)
+        reject_unknown("GMPHD", deprecated)
         for name, value in _common_fields(
-            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth_weights=birth_weights,
-            birth_means=birth_means, birth_covs=birth_covs, capacity=capacity, prune_threshold=prune_threshold,
-            merge_threshold=merge_threshold, gate=gate, max_estimates=max_estimates,
+            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth=birth, capacity=capacity,
+            reduction=reduction, gate=gate, max_estimates=max_estimates,
         ).items():
             setattr(self, name, value)
         self.extraction_threshold = _scalar("extraction_threshold", extraction_threshold, low=0.0)
         # κ = 0 leaves a measurement no component reaches as 0/0 (its weight is dropped in silence):
         # refused; a clutter-free model is a small positive κ.
         self.clutter_density = _scalar("clutter_density", clutter_density, low=0.0, open_low=True)
-        self.reduction = reduction
-        for name, value in _initial_fields(initial_weights, initial_means, initial_covs, model.state_dim,
-                                           self.capacity, "capacity").items():
-            setattr(self, name, value)
+        self.initial = _initial_mixture_checked(initial, model.state_dim, self.capacity, "capacity")
 
     # ------------------------------------------------------------------------------------------
     def init(self) -> GMPHDMixture:
@@ -422,7 +424,8 @@ class GMPHD(AbstractMultiTargetFilter):
         w, m, P, active, is_birth = predicted
         loglik, pair, cond = _pair_likelihoods(self, m, P, active, measurements, valid, k)
         q = jnp.where(pair, jnp.exp(jnp.where(pair, loglik, 0.0)), 0.0)
-        if self.reduction == "stonesoup":
+        stonesoup = self.reduction.stonesoup_update
+        if stonesoup:
             # Stone Soup's hypothesiser re-tags a detected birth component, so its updater applies
             # P_S to it as well (it applies P_S in the update, to every non-"birth" tag).
             w = jnp.where(is_birth, self.prob_survival * w, w)
@@ -430,10 +433,10 @@ class GMPHD(AbstractMultiTargetFilter):
         denom = self.clutter_density + jnp.sum(numer, axis=0)  # (M,)
         safe = jnp.where(denom > 0.0, denom, 1.0)
         w_det = jnp.where(pair, numer / safe[None, :], 0.0)
-        miss_active = active & ~is_birth if self.reduction == "stonesoup" else active
+        miss_active = active & ~is_birth if stonesoup else active
         w_miss = jnp.where(miss_active, (1.0 - self.prob_detect) * w, 0.0)
         weights, means, covs, out_active = _updated_layout(w_miss, miss_active, w_det, pair, m, P, cond)
-        if self.reduction == "stonesoup":
+        if stonesoup:
             # Stone Soup replaces a zero weight by machine epsilon (to keep its reducer's divisions
             # finite); the component is then pruned, but its epsilon joins the redistributed weight.
             weights = jnp.where(out_active & (weights == 0.0), jnp.finfo(weights.dtype).eps, weights)
@@ -452,7 +455,7 @@ class GMPHD(AbstractMultiTargetFilter):
 
         **Returns:** ``(weights, means, covs, active, num_dropped, dropped_weight, num_pruned)``.
         """
-        return _reduce_mixture(self, weights, means, covs, active)
+        return self.reduction(weights, means, covs, active, self.capacity, self.birth_means[0], self.birth_covs[0])
 
     def step(self, mixture: GMPHDMixture, measurements, valid) -> tuple[GMPHDMixture, GMPHDStepInfo]:
         """One scan: :meth:`predict`, :meth:`update` on the padded scan, :meth:`reduce`.

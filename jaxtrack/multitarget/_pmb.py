@@ -80,18 +80,15 @@ class PMB(AbstractMultiBernoulliFilter):
 
     associator: AbstractAssociator
 
-    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density, birth_weights, birth_means,
-                 birth_covs, max_tracks: int, poisson_capacity: int = 16, initial_weights=None, initial_means=None,
-                 initial_covs=None, existence_threshold=1e-5, poisson_prune_threshold=1e-5,
-                 poisson_merge_threshold=4.0, estimation_threshold=0.4, gate=math.inf,
-                 associator: AbstractAssociator | None = None):
+    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density, birth=None,
+                 max_tracks: int, poisson_capacity: int = 16, initial=None, existence_threshold=1e-5,
+                 poisson_reduction=None, estimation_threshold=0.4, gate=math.inf,
+                 associator: AbstractAssociator | None = None, **deprecated):
         fields = _mb_fields(
             filter, model, prob_survival=prob_survival, prob_detect=prob_detect, clutter_density=clutter_density,
-            birth_weights=birth_weights, birth_means=birth_means, birth_covs=birth_covs,
-            initial_weights=initial_weights, initial_means=initial_means, initial_covs=initial_covs,
-            poisson_capacity=poisson_capacity, max_tracks=max_tracks, poisson_prune_threshold=poisson_prune_threshold,
-            poisson_merge_threshold=poisson_merge_threshold, existence_threshold=existence_threshold,
-            estimation_threshold=estimation_threshold, gate=gate,
+            birth=birth, initial=initial, poisson_capacity=poisson_capacity, max_tracks=max_tracks,
+            poisson_reduction=poisson_reduction, existence_threshold=existence_threshold,
+            estimation_threshold=estimation_threshold, gate=gate, deprecated=deprecated, cls="PMB",
         )
         for name, value in fields.items():
             setattr(self, name, value)

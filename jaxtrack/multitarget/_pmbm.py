@@ -109,10 +109,10 @@ class PMBM(AbstractMultiBernoulliFilter):
       likelihood ratios to the miss).
     - ``clutter_density``: ``κ``, clutter points per unit measurement-space volume per scan, ``> 0``
       and finite (0 would make a measurement that no track or Poisson component reaches impossible).
-    - ``birth_weights`` ``(B,)``, ``birth_means`` ``(B, n)``, ``birth_covs`` ``(B, n, n)``: the
-      Poisson birth intensity added at every prediction.
-    - ``initial_weights``, ``initial_means``, ``initial_covs``: the Poisson intensity the first
-      scan updates (G18's prior; default: the birth intensity). Scan 0 is not predicted.
+    - ``birth``: the Poisson birth intensity added at every prediction, a
+      :class:`~jaxtrack.multitarget.GaussianMixture`.
+    - ``initial``: the Poisson intensity the first scan updates (G18's prior; default: ``birth``),
+      a :class:`~jaxtrack.multitarget.GaussianMixture`. Scan 0 is not predicted.
     - ``max_tracks``: ``N``; ``max_hypotheses``: ``H`` (the reference's ``Nhyp_max``, 200 in
       its Williams (2015) study); ``poisson_capacity``: ``J``.
     - ``assignment_rows``: ``A``, the most measurements per scan that fall in some track's gate
@@ -123,9 +123,11 @@ class PMBM(AbstractMultiBernoulliFilter):
       :class:`PMBMStepInfo` reports the sizes each scan needed.
     - ``hypothesis_threshold``: global hypotheses of normalised weight below it are pruned
       (default 0: keep the ``H`` best); ``existence_threshold``: a track whose local hypotheses
-      all have ``r`` at or below it is removed (default 1e-5); ``poisson_prune_threshold``
-      (default 1e-5) and ``poisson_merge_threshold`` (squared Mahalanobis distance, default 4)
-      reduce the Poisson intensity as the GM-PHD does.
+      all have ``r`` at or below it is removed (default 1e-5); ``poisson_reduction``: the
+      mixture-reduction strategy of the Poisson intensity, as the GM-PHD's ``reduction``
+      (default :class:`~jaxtrack.multitarget.VoMaReduction` ``(1e-5, 4)``).
+    - Deprecated (one release): ``birth_*``, ``initial_*``, ``poisson_prune_threshold``,
+      ``poisson_merge_threshold``.
     - ``estimation_threshold``: estimates are the tracks of the best global hypothesis with
       ``r`` above it (default 0.4, the reference's estimator 1).
     - ``gate``: Mahalanobis distance beyond which a measurement does not update a track or a
@@ -153,19 +155,16 @@ class PMBM(AbstractMultiBernoulliFilter):
     assignment_rows: int = eqx.field(static=True)
     assignment_tracks: int = eqx.field(static=True)
 
-    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density, birth_weights, birth_means,
-                 birth_covs, max_tracks: int, max_hypotheses: int, poisson_capacity: int = 16,
-                 assignment_rows: int = 16, assignment_tracks: int = 24,
-                 initial_weights=None, initial_means=None, initial_covs=None, hypothesis_threshold=0.0,
-                 existence_threshold=1e-5, poisson_prune_threshold=1e-5, poisson_merge_threshold=4.0,
-                 estimation_threshold=0.4, gate=math.inf):
+    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density, birth=None,
+                 max_tracks: int, max_hypotheses: int, poisson_capacity: int = 16,
+                 assignment_rows: int = 16, assignment_tracks: int = 24, initial=None, hypothesis_threshold=0.0,
+                 existence_threshold=1e-5, poisson_reduction=None, estimation_threshold=0.4, gate=math.inf,
+                 **deprecated):
         fields = _mb_fields(
             filter, model, prob_survival=prob_survival, prob_detect=prob_detect, clutter_density=clutter_density,
-            birth_weights=birth_weights, birth_means=birth_means, birth_covs=birth_covs,
-            initial_weights=initial_weights, initial_means=initial_means, initial_covs=initial_covs,
-            poisson_capacity=poisson_capacity, max_tracks=max_tracks, poisson_prune_threshold=poisson_prune_threshold,
-            poisson_merge_threshold=poisson_merge_threshold, existence_threshold=existence_threshold,
-            estimation_threshold=estimation_threshold, gate=gate,
+            birth=birth, initial=initial, poisson_capacity=poisson_capacity, max_tracks=max_tracks,
+            poisson_reduction=poisson_reduction, existence_threshold=existence_threshold,
+            estimation_threshold=estimation_threshold, gate=gate, deprecated=deprecated, cls="PMBM",
         )
         for name, value in fields.items():
             setattr(self, name, value)

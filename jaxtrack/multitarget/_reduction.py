@@ -3,8 +3,9 @@
 One place for the reduction every Gaussian-mixture multi-target filter applies to its intensity
 (the GM-PHD and GM-CPHD filters, the Poisson part of the PMB/PMBM filters): Table II of Vo & Ma
 (2006), "The Gaussian mixture probability hypothesis density filter", IEEE Trans. Signal Process.
-54(11), 4091-4104 (``reduction="vo-ma"``), or Stone Soup's ``GaussianMixtureReducer`` pairwise
-merging (``reduction="stonesoup"``).
+54(11), 4091-4104 (:class:`~jaxtrack.multitarget.VoMaReduction`), or Stone Soup's
+``GaussianMixtureReducer`` pairwise merging (:class:`~jaxtrack.multitarget.StoneSoupReduction`);
+the strategy objects are in :mod:`._mixture`, the numerics here.
 
 Each merging has two forms with the same values. The fixed loops (:func:`_merge_loops`: ``J_max``
 passes, each over every candidate) are what reverse-mode differentiation needs; the forward pass
@@ -27,12 +28,16 @@ import jax.numpy as jnp
 from ..filters._linalg import cholesky_and_inverse
 
 
-def _reduce_mixture(f, weights, means, covs, active):
-    """:meth:`GMPHD.reduce` for any module ``f`` with its fields (``prune_threshold``,
-    ``merge_threshold``, ``reduction``, ``capacity``, the birth mixture)."""
+def reduce_mixture(stonesoup: bool, prune_threshold, merge_threshold, capacity: int, free_mean, free_cov,
+                   weights, means, covs, active):
+    """Prune and merge ``(weights (K,), means (K, n), covs (K, n, n), active (K,))`` into
+    ``capacity`` slots: Table II (``stonesoup`` False) or Stone Soup's reducer (True); free slots
+    hold ``(free_mean, free_cov)``. The strategy objects of :mod:`._mixture` call this.
+
+    **Returns:** ``(weights, means, covs, active, num_dropped, dropped_weight, num_pruned)``."""
     dtype = weights.dtype
-    T, U = f.prune_threshold.astype(dtype), f.merge_threshold.astype(dtype)
-    ss = f.reduction == "stonesoup"
+    T, U = prune_threshold.astype(dtype), merge_threshold.astype(dtype)
+    ss = stonesoup
     keep = active & ((weights >= T) if ss else (weights > T))
     num_pruned = jnp.sum(active & ~keep).astype(jnp.int32)
     if ss:
@@ -40,9 +45,9 @@ def _reduce_mixture(f, weights, means, covs, active):
         pruned = jnp.sum(jnp.where(active & ~keep, weights, 0.0))
         n_keep = jnp.sum(keep)
         weights = weights + jnp.where(keep, pruned / jnp.maximum(n_keep, 1), 0.0)
-    free = (f.birth_means[0].astype(dtype), f.birth_covs[0].astype(dtype))  # what a free slot holds
+    free = (free_mean.astype(dtype), free_cov.astype(dtype))  # what a free slot holds
     merge = _merge_stonesoup if ss else _merge_vo_ma
-    out = merge(f.capacity, U, *free, weights, means, covs, keep)
+    out = merge(capacity, U, *free, weights, means, covs, keep)
     return *out, num_pruned
 
 

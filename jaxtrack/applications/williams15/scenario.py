@@ -77,9 +77,7 @@ def methods(scen: Scenario | None = None, settings: Williams15Settings | None = 
         scen, settings = scenario()
     s = settings
     kf = KalmanFilter()
-    birth = dict(birth_weights=s.birth_weights, birth_means=s.birth_means, birth_covs=s.birth_covs)
-    initial = dict(initial_weights=s.initial_weights, initial_means=s.initial_means, initial_covs=s.initial_covs)
-    common = dict(prob_survival=s.prob_survival, prob_detect=s.prob_detect, **birth, **initial)
+    common = dict(prob_survival=s.prob_survival, prob_detect=s.prob_detect, birth=s.birth, initial=s.initial)
     mb = dict(clutter_density=s.clutter_density, max_tracks=MAX_TRACKS, gate=GATE)
     initiator = OnePointInitiator(prior_mean=np.asarray(s.birth_means[0]), prior_cov=np.asarray(s.birth_covs[0]),
                                   filter=kf)
