@@ -1,0 +1,144 @@
+"""Inputs that used to give a silent wrong answer: each is now an error, a False ``ok``, an
+``overflow`` flag or a NaN, eagerly and under ``jax.jit``.
+
+- association: a NaN or ``+inf`` in a valid row of ``L`` (every method: ``ok`` False);
+  ``LoopyBP``'s ``num_iters``/``damping`` (construction error; a traced damping: ``ok`` False);
+  JPDA beyond its cluster caps (``Association.overflow`` and a ``CapacityWarning``);
+- ``pda_update`` with a row of ``β`` that is not a probability row (error; traced: NaN);
+- GOSPA/OSPA with a NaN valid point (NaN distance) or a traced bad cutoff/order (run-time error);
+- ``fit_detection_and_clutter`` on scans that are all padding (error; traced: ``ok`` False).
+
+Small sizes; every jitted function is built once at module level (or in a module fixture).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxtrack  # noqa: F401  (float64)
+from jaxtrack._validation import InputError
+from jaxtrack.association import GNN, JPDA, PDA, Association, LoopyBP
+from jaxtrack.multitarget import CapacityWarning
+
+NINF = -np.inf
+LOG_MISS = float(np.log(0.2))
+
+# ---------------------------------------------------------------------------------------------
+# Association: non-finite entries of L.
+
+METHODS = {"GNN": GNN(), "PDA": PDA(), "JPDA": JPDA(), "LoopyBP": LoopyBP(num_iters=5)}
+# LoopyBP with a traced damping: one program for this test and the damping test below.
+_bp = jax.jit(lambda damping, L, valid: LoopyBP(num_iters=5, damping=damping)(L, valid))
+_JITTED = {name: jax.jit(lambda L, valid, m=m: m(L, valid)) for name, m in METHODS.items()}
+_JITTED["LoopyBP"] = lambda L, valid: _bp(jnp.asarray(0.0), L, valid)
+# Eagerly (op by op; the loops inside are traced and compiled again at every eager call, the
+# costly part of this file) only the answers that were wrong: JPDA's with a NaN (read as gated
+# out) and GNN's with +inf (accepted); the rest runs the same code, checked under jit.
+EAGER = {"GNN": np.inf, "JPDA": np.nan}
+
+
+def _log_weights(bad=None):
+    """``L`` ``(3, 1 + 3)``: two valid tracks sharing measurement 0, a padded row of NaN, and
+    ``bad`` (if given) at track 1, measurement 1."""
+    L = np.array([
+        [LOG_MISS, 1.0, 0.5, NINF],
+        [LOG_MISS, 0.3, NINF, -0.2],
+        [np.nan, np.nan, np.inf, np.nan],  # padding: anything goes
+    ])
+    if bad is not None:
+        L[1, 2] = bad
+    return jnp.asarray(L), jnp.asarray([True, True, False])
+
+
+@pytest.mark.parametrize("name", list(METHODS))
+def test_nonfinite_valid_row_is_not_ok(name):
+    """NaN or +inf in a valid row: ok False for every method, eager and jitted (JPDA's log-space
+    sums used to read a NaN as −inf, "gated out", and answer ok=True); −inf and a padded row of
+    garbage stay ok. No method has a capacity to overflow here."""
+    def check_bad(got, bad):
+        assert not bool(got.ok), (name, bad)
+        assert not bool(got.overflow)
+        assert not np.isfinite(float(got.log_normalizer))
+
+    jitted = _JITTED[name]
+    good = jitted(*_log_weights())
+    assert bool(good.ok) and not bool(good.overflow)
+    assert np.all(np.isfinite(np.asarray(good.association_probabilities)))
+    for bad in (np.nan, np.inf):
+        check_bad(jitted(*_log_weights(bad)), bad)
+    if name in EAGER:
+        check_bad(METHODS[name](*_log_weights(EAGER[name])), EAGER[name])
+
+
+def test_association_overflow_field_is_last():
+    names = [f.name for f in dataclasses.fields(Association)]
+    assert names[-2:] == ["ok", "overflow"]
+
+
+# ---------------------------------------------------------------------------------------------
+# LoopyBP's options.
+
+
+def test_loopybp_rejects_bad_options():
+    """num_iters < 1 and damping outside [0, 1) (1 never updates: residual 0, "converged")."""
+    for damping in (1.0, 1.5, -0.1, np.nan):
+        with pytest.raises(InputError, match="`damping`"):
+            LoopyBP(damping=damping)
+    for num_iters in (0, -3, True):
+        with pytest.raises(InputError, match="`num_iters`"):
+            LoopyBP(num_iters=num_iters)
+    LoopyBP(num_iters=1, damping=0.0)
+    LoopyBP(damping=jnp.asarray(0.999))
+
+
+def test_loopybp_traced_damping_out_of_range_is_not_ok():
+    """A traced damping skips the constructor's check: out of [0, 1) it gives ok False (1 used
+    to report residual 0, "converged", with the messages never updated)."""
+    for damping, ok in ((0.5, True), (1.0, False), (-0.5, False), (np.nan, False)):
+        assert bool(_bp(jnp.asarray(damping), *_log_weights()).ok) == ok, damping
+    # Also with no measurement at all (no message to carry a NaN damping).
+    L = jnp.full((3, 1), LOG_MISS)
+    for damping, ok in ((0.5, True), (1.0, False)):
+        assert bool(_bp(jnp.asarray(damping), L, jnp.ones(3, bool)).ok) == ok, damping
+
+
+# ---------------------------------------------------------------------------------------------
+# JPDA beyond its cluster caps. min(T, M) = 3 > max_exact = 2: the cluster path.
+
+_OVERLAP = jnp.asarray(np.concatenate(
+    [np.full((3, 1), LOG_MISS), np.random.default_rng(5).normal(size=(3, 3))], axis=1
+))  # three tracks gating all three measurements: one cluster of 3
+_CAPPED = JPDA(max_exact=2, max_cluster_tracks=2)
+_capped_jit = jax.jit(lambda L, valid: _CAPPED(L, valid))
+
+
+def test_jpda_overflow_flag_and_warning():
+    """A cluster of 3 tracks over ``max_cluster_tracks=2``: overflow True (and ok False), jitted
+    and eager, and the eager call warns naming the caps. With one track padded, the cluster of 2
+    fits: overflow False, no warning, exact marginals (and a NaN in a valid row is reported on
+    the cluster path too)."""
+    three, two = jnp.ones(3, bool), jnp.asarray([True, True, False])
+    for valid in (three, two):
+        exact = np.asarray(_JITTED["JPDA"](_OVERLAP, valid).association_probabilities)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no warning under jit: the flag is the answer there
+            jitted = _capped_jit(_OVERLAP, valid)
+            if valid is two:
+                eager = _CAPPED(_OVERLAP, valid)
+        if valid is three:
+            with pytest.warns(CapacityWarning, match="max_cluster_tracks=2.*LoopyBP"):
+                eager = _CAPPED(_OVERLAP, valid)
+        for got in (eager, jitted):
+            error = np.abs(np.asarray(got.association_probabilities) - exact).max()
+            if valid is three:
+                assert bool(got.overflow) and not bool(got.ok)
+                assert error > 0.05  # what the flag is for
+            else:
+                assert bool(got.ok) and not bool(got.overflow) and error < 1e-12
+    assert not bool(_capped_jit(_OVERLAP.at[1, 2].set(np.nan), two).ok)
