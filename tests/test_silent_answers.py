@@ -23,7 +23,8 @@ import pytest
 
 import jaxtrack  # noqa: F401  (float64)
 from jaxtrack._validation import InputError
-from jaxtrack.association import GNN, JPDA, PDA, Association, LoopyBP
+from jaxtrack.association import GNN, JPDA, PDA, Association, LoopyBP, pda_update
+from jaxtrack.filters._updates import Conditioned
 from jaxtrack.multitarget import CapacityWarning
 
 NINF = -np.inf
@@ -142,3 +143,40 @@ def test_jpda_overflow_flag_and_warning():
             else:
                 assert bool(got.ok) and not bool(got.overflow) and error < 1e-12
     assert not bool(_capped_jit(_OVERLAP.at[1, 2].set(np.nan), two).ok)
+
+
+# ---------------------------------------------------------------------------------------------
+# pda_update's β row.
+
+_N, _M = 2, 2
+_COND = Conditioned(
+    mean=jnp.asarray([[1.0, 0.0], [0.0, 1.0]]),
+    cov=jnp.broadcast_to(0.5 * jnp.eye(_N), (_M, _N, _N)),
+    innovation=jnp.asarray([[1.0], [-1.0]]),
+    innovation_cov=jnp.ones((_M, 1, 1)),
+    log_likelihood=jnp.zeros(_M),
+    gain=jnp.full((_M, _N, 1), 0.5),
+)
+_X, _P = jnp.zeros(_N), jnp.eye(_N)
+_pda_jit = jax.jit(pda_update, static_argnames="form")
+_BAD_ROWS = {
+    "negative": [1.2, -0.2, 0.0],
+    "sum-low": [0.5, 0.2, 0.0],
+    "sum-high": [0.5, 0.4, 0.3],
+    "nan": [np.nan, 0.5, 0.5],
+}
+
+
+@pytest.mark.parametrize("form", ["mixture"])
+def test_pda_update_rejects_rows_that_are_not_probabilities(form):
+    """Eager: InputError naming `association_row`; jitted: NaN mean and covariance (not a
+    finite wrong moment). A row of zeros (padding) and a row off 1 by rounding are fine."""
+    for name, row in _BAD_ROWS.items():
+        with pytest.raises(InputError, match="`association_row`"):
+            pda_update(_COND, jnp.asarray(row), _X, _P, form=form)
+        mean, cov = _pda_jit(_COND, jnp.asarray(row), _X, _P, form=form)
+        assert np.all(np.isnan(np.asarray(mean))) and np.all(np.isnan(np.asarray(cov))), name
+    for row in ([0.0, 0.0, 0.0], [0.2, 0.3, 0.5 + 1e-13]):
+        for call in (pda_update, _pda_jit):
+            mean, cov = call(_COND, jnp.asarray(row), _X, _P, form=form)
+            assert np.all(np.isfinite(np.asarray(mean))) and np.all(np.isfinite(np.asarray(cov)))
