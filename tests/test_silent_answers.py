@@ -25,6 +25,7 @@ import jaxtrack  # noqa: F401  (float64)
 from jaxtrack._validation import InputError
 from jaxtrack.association import GNN, JPDA, PDA, Association, LoopyBP, pda_update
 from jaxtrack.filters._updates import Conditioned
+from jaxtrack.montecarlo._ospa import gospa, ospa
 from jaxtrack.multitarget import CapacityWarning
 
 NINF = -np.inf
@@ -180,3 +181,51 @@ def test_pda_update_rejects_rows_that_are_not_probabilities(form):
         for call in (pda_update, _pda_jit):
             mean, cov = call(_COND, jnp.asarray(row), _X, _P, form=form)
             assert np.all(np.isfinite(np.asarray(mean))) and np.all(np.isfinite(np.asarray(cov)))
+
+
+# ---------------------------------------------------------------------------------------------
+# GOSPA / OSPA.
+
+
+def _both(truth, tv, est, ev, cutoff, order):
+    g = gospa(truth, tv, est, ev, cutoff=cutoff, order=order)
+    return g.distance, g.localisation, ospa(truth, tv, est, ev, cutoff=cutoff, order=order).distance
+
+
+_metrics_jit = jax.jit(_both)
+
+
+def _sets(bad_truth=None, bad_estimate=None):
+    truth = np.array([[0.0, 0.0], [3.0, 0.0], [np.nan, np.nan]])  # row 2 is padding
+    est = np.array([[0.1, 0.0], [9.0, 9.0]])
+    if bad_truth is not None:
+        truth[1, 0] = bad_truth
+    if bad_estimate is not None:
+        est[1, 1] = bad_estimate
+    return (jnp.asarray(truth), jnp.asarray([True, True, False]), jnp.asarray(est),
+            jnp.asarray([True, True]))
+
+
+def test_gospa_nan_valid_point_is_nan():
+    """A NaN (or infinite) coordinate of a valid point: NaN distances (it used to pass as a
+    missed/false point at a finite c^p/2); padding holding NaN stays finite."""
+    cutoff, order = jnp.asarray(2.0), jnp.asarray(2.0)
+    assert np.all(np.isfinite(_metrics_jit(*_sets(), cutoff, order)))
+    for kw in (dict(bad_truth=np.nan), dict(bad_estimate=np.nan), dict(bad_truth=np.inf)):
+        assert np.all(np.isnan(_metrics_jit(*_sets(**kw), cutoff, order))), kw
+    # Eagerly (each call traces the assignment solver's loops again): one case (OSPA shares
+    # GOSPA's assignment, checked under jit above).
+    assert np.isnan(float(gospa(*_sets(bad_estimate=np.nan), cutoff=2.0).distance))
+
+
+def test_gospa_bad_cutoff_or_order():
+    """Eager: InputError naming the argument. Traced: a run-time error naming it (it used to be
+    a NaN in every value, which said nothing of the cause)."""
+    for fn in (gospa, ospa):
+        with pytest.raises(InputError, match="`cutoff`"):
+            fn(*_sets(), cutoff=-1.0)
+        with pytest.raises(InputError, match="`order`"):
+            fn(*_sets(), cutoff=1.0, order=0.5)
+    for cutoff, order, name in ((0.0, 2.0, "`cutoff`"), (-1.0, 2.0, "`cutoff`"), (2.0, 0.5, "`order`")):
+        with pytest.raises(Exception, match=name):
+            jax.block_until_ready(_metrics_jit(*_sets(), jnp.asarray(cutoff), jnp.asarray(order)))
