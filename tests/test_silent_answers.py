@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -24,9 +25,11 @@ import pytest
 import jaxtrack  # noqa: F401  (float64)
 from jaxtrack._validation import InputError
 from jaxtrack.association import GNN, JPDA, PDA, Association, LoopyBP, pda_update
+from jaxtrack.filters import KalmanFilter
 from jaxtrack.filters._updates import Conditioned
+from jaxtrack.models import constant_velocity
 from jaxtrack.montecarlo._ospa import gospa, ospa
-from jaxtrack.multitarget import CapacityWarning
+from jaxtrack.multitarget import CapacityWarning, OnePointInitiator, Tracker, fit_detection_and_clutter
 
 NINF = -np.inf
 LOG_MISS = float(np.log(0.2))
@@ -229,3 +232,30 @@ def test_gospa_bad_cutoff_or_order():
     for cutoff, order, name in ((0.0, 2.0, "`cutoff`"), (-1.0, 2.0, "`cutoff`"), (2.0, 0.5, "`order`")):
         with pytest.raises(Exception, match=name):
             jax.block_until_ready(_metrics_jit(*_sets(), jnp.asarray(cutoff), jnp.asarray(order)))
+
+
+# ---------------------------------------------------------------------------------------------
+# fit_detection_and_clutter on scans that are all padding.
+
+
+@pytest.fixture(scope="module")
+def small_tracker():
+    model = constant_velocity(1.0, dim=1, accel_psd=0.1, measurement_std=1.0,
+                              initial_mean=np.zeros(2), initial_cov=np.diag([100.0, 4.0]))
+    return Tracker(KalmanFilter(), model, PDA(), OnePointInitiator(np.zeros(2), np.diag([100.0, 4.0])),
+                   prob_detect=0.8, clutter_density=0.01, capacity=2, clutter_volume=100.0)
+
+
+def test_fit_on_all_padding_is_not_ok(small_tracker):
+    """No valid measurement anywhere: InputError naming `valid` (concrete), ok False (traced)."""
+    z = jnp.zeros((3, 2, 1))
+    none = jnp.zeros((3, 2), bool)
+    with pytest.raises(InputError, match="`valid`"):
+        fit_detection_and_clutter(small_tracker, z, none)
+
+    @eqx.filter_jit
+    def fit(valid):
+        return fit_detection_and_clutter(small_tracker, z, valid, num_iterations=2).ok
+
+    assert not bool(fit(none))
+    assert bool(fit(none.at[0, 0].set(True)))
