@@ -20,6 +20,15 @@ class InputError(ValueError):
     """Raised when an argument to a jaxtrack entry point has the wrong shape or value."""
 
 
+class CapacityWarning(UserWarning):
+    """A static capacity (e.g. ``max_measurements``) was exceeded; the excess was counted, not stored.
+
+    Defined here, below every subpackage, so that :mod:`jaxtrack.association` (JPDA's cluster
+    caps) and :mod:`jaxtrack.multitarget` (scan, track-table and mixture capacities) warn with
+    the same class; it is exported as ``jaxtrack.multitarget.CapacityWarning``.
+    """
+
+
 def is_concrete(x) -> bool:
     """True when ``x`` holds a value that can be inspected now (not a tracer).
 

@@ -260,9 +260,13 @@ def test_gradient_matches_central_differences(p):
     assert np.all(grad[2] == 0.0)  # the false one (beyond c from every truth) does not
 
 
-def test_traced_bad_cutoff_gives_nan():
-    g, o, _ = _run(CASES, cutoff=-1.0)
-    assert np.all(np.isnan(g.distance)) and np.all(np.isnan(o.distance))
+def test_traced_bad_cutoff_raises():
+    """A traced cutoff/order out of range is a run-time error naming it (equinox.error_if),
+    not a NaN metric (tests/test_silent_answers.py has the eager and unbatched cases)."""
+    with pytest.raises(Exception, match="`cutoff`"):
+        jax.block_until_ready(_run(CASES, cutoff=-1.0))
+    with pytest.raises(Exception, match="`order`"):
+        jax.block_until_ready(_run(CASES, order=0.5))
 
 
 def test_input_errors_name_the_argument():

@@ -130,10 +130,12 @@ class GNN(AbstractAssociator):
     (column 0 when missed), zero rows for invalid tracks, ``clutter_probabilities`` ``1 − Σ_t β[t,
     j + 1]`` (1 for every measurement no track took, padded or not: the associator is not told
     which columns are padding), ``log_normalizer`` the best event's log weight ``Σ_t L[t, θ_t]``
-    over valid tracks, ``residual`` 0, and ``ok`` False when that weight is not finite or a valid
-    row of ``L`` holds a NaN. A valid track with no allowed option at all (``L[t, 0] = −inf`` and
-    every measurement gated out or taken) is reported as missed, with ``log_normalizer = −inf``
-    and ``ok`` False: no joint event has positive probability.
+    over valid tracks, ``residual`` 0, ``overflow`` False (no capacity), and ``ok`` False when
+    that weight is not finite or a valid row of ``L`` holds a NaN or ``+inf`` (no probability: a
+    ``+inf`` entry is forbidden to the solver like a NaN, so the event it picks means nothing;
+    ``log_normalizer`` is then NaN). A valid track with no allowed option at all
+    (``L[t, 0] = −inf`` and every measurement gated out or taken) is reported as missed, with
+    ``log_normalizer = −inf`` and ``ok`` False: no joint event has positive probability.
 
     No options; jittable and vmappable. The best event is differentiable in ``L`` (the
     assignment itself is piecewise constant): ``∂ log_normalizer / ∂ L[t, θ_t] = 1``.
@@ -163,12 +165,15 @@ class GNN(AbstractAssociator):
         # whatever L[t, 0] holds.
         chosen = jnp.where(row_to_col >= 0, chosen, -jnp.inf)
         log_normalizer = jnp.sum(jnp.where(valid, chosen, 0.0))
-        nan_in_valid_rows = jnp.any(jnp.isnan(L) & valid[:, None])
-        ok = jnp.isfinite(log_normalizer) & ~nan_in_valid_rows
+        # NaN and +inf (−inf is legal: gated out) in a valid row: the same rule as PDA/JPDA/BP.
+        bad_input = jnp.any((jnp.isnan(L) | (L == jnp.inf)) & valid[:, None])
+        log_normalizer = jnp.where(bad_input, jnp.nan, log_normalizer)
+        ok = jnp.isfinite(log_normalizer)
         return Association(
             association_probabilities=beta,
             clutter_probabilities=1.0 - jnp.sum(beta[:, 1:], axis=0),
             log_normalizer=log_normalizer,
             residual=jnp.zeros((), L.dtype),
             ok=ok,
+            overflow=jnp.zeros((), bool),
         )

@@ -6,11 +6,13 @@ clusters solved one by one (Fortmann, Bar-Shalom & Scheffe 1983, §III; Stone So
 cluster the same way). With static shapes: every track is a potential cluster root, each
 cluster gathers at most ``max_cluster_tracks`` tracks (padded), and the exact method runs on
 every root's sub-problem under ``jax.vmap``. A cluster larger than the cap is never truncated
-in silence: the result's ``ok`` is False and :func:`cluster_sizes` reports the sizes.
+in silence: the result's ``ok`` is False, its ``overflow`` True, and :func:`cluster_sizes`
+reports the sizes.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -45,6 +47,10 @@ def cluster_sizes(labels: Int[Array, " T"]) -> Int[Array, " T"]:
     return jnp.zeros((T,), jnp.int32).at[labels].add(1)
 
 
+@functools.partial(
+    jax.jit,
+    static_argnames=("solve", "max_cluster_tracks", "max_cluster_measurements", "max_large_clusters", "small"),
+)
 def solve_by_cluster(
     solve,
     log_weights,
@@ -62,7 +68,9 @@ def solve_by_cluster(
     exact). Two tiers keep the static cost low where most clusters are small: every track is a
     potential root of a cluster of at most ``small`` tracks (sub-problems
     ``(small, 1 + max_cluster_measurements)``), and the ``max_large_clusters`` largest clusters
-    beyond that are solved with up to ``max_cluster_tracks`` tracks.
+    beyond that are solved with up to ``max_cluster_tracks`` tracks. Jitted (``solve`` and the caps
+    static): called eagerly (a JPDA outside ``jit``) it runs as one program, not op by op
+    through its vmapped sub-problems; inside a trace it is inlined.
 
     **Arguments:**
 
@@ -71,9 +79,12 @@ def solve_by_cluster(
     - ``max_cluster_tracks``, ``max_cluster_measurements``: the caps of a cluster (static).
     - ``max_large_clusters``: how many clusters may exceed ``small`` tracks (static).
 
-    **Returns:** ``(beta (T, 1 + M), log_Z (), ok (), largest ())``: the marginals scattered back
-    to the tracks' rows, the sum of the clusters' log normalisers, False when a cap was exceeded
-    (or a sub-problem failed), and the largest cluster's size.
+    **Returns:** ``(beta (T, 1 + M), log_Z (), ok (), largest (), overflow ())``: the marginals
+    scattered back to the tracks' rows, the sum of the clusters' log normalisers, False when a
+    cap was exceeded (or a sub-problem failed), the largest cluster's size, and True exactly
+    when a cap was exceeded (a cluster with more than ``max_cluster_tracks`` tracks or gating
+    more than ``max_cluster_measurements`` measurements, or more than ``max_large_clusters``
+    clusters beyond ``small`` tracks).
     """
     T, Mp1 = log_weights.shape
     M = Mp1 - 1
@@ -123,11 +134,14 @@ def solve_by_cluster(
     beta = beta[:T, :Mp1]
     log_Z = jnp.sum(jnp.where(small_roots, log_z_small, 0.0)) + jnp.sum(jnp.where(use_big, log_z_big, 0.0))
     largest = jnp.max(sizes)
+    overflow = (
+        (largest > K)
+        | (num_big > max_large_clusters)
+        | jnp.any(jnp.where(is_root, num_cols > C, False))
+    )
     ok = (
         jnp.all(jnp.where(small_roots, ok_small, True))
         & jnp.all(jnp.where(use_big, ok_big, True))
-        & (largest <= K)
-        & (num_big <= max_large_clusters)
-        & jnp.all(jnp.where(is_root, num_cols <= C, True))
+        & ~overflow
     )
-    return beta, log_Z, ok, largest
+    return beta, log_Z, ok, largest, overflow

@@ -17,13 +17,15 @@ vmappable, and are differentiable with respect to ``L`` (entries at ``−inf`` g
 
 from __future__ import annotations
 
+import warnings
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from .._validation import InputError
+from .._validation import CapacityWarning, InputError, is_concrete, nan_where_traced
 from ._clusters import solve_by_cluster
 from ._types import AbstractAssociator, Association
 
@@ -89,7 +91,9 @@ def _prepare(log_weights: ArrayLike, valid_tracks: ArrayLike | None) -> tuple[Ar
 
     A padded track's row becomes ``[0, −inf, …, −inf]``: it is certainly missed with weight 1, so
     it claims no measurement and multiplies every joint event by 1, whatever its row held (NaN
-    included: a select, not arithmetic).
+    included: a select, not arithmetic). A valid row keeps what it holds, NaN and ``+inf``
+    included: :func:`_result` reports them (the log-space sums would otherwise read a NaN as
+    ``−inf``, i.e. as gated out, and answer with finite marginals).
     """
     L = jnp.asarray(log_weights)
     if not jnp.issubdtype(L.dtype, jnp.floating):
@@ -111,14 +115,29 @@ def _prepare(log_weights: ArrayLike, valid_tracks: ArrayLike | None) -> tuple[Ar
     return jnp.where(valid[:, None], L, inert), valid
 
 
-def _result(beta, clutter, log_normalizer, residual, valid) -> Association:
-    """The :class:`Association`, with padded rows zeroed and ``ok`` = everything finite."""
+def _result(beta, clutter, log_normalizer, residual, valid, L, overflow=None) -> Association:
+    """The :class:`Association`, with padded rows zeroed and ``ok`` = everything finite, no
+    capacity exceeded.
+
+    ``L`` is the prepared matrix (:func:`_prepare`: padded rows inert). A valid row holding NaN
+    or ``+inf`` has no probabilities (``−inf`` is legal: gated out; ``+inf`` is a certain event
+    whose weight no sum can normalise): that row of ``β``, the clutter probabilities and
+    ``log_normalizer`` become NaN, so ``ok`` is False whatever the method made of the entry.
+    ``overflow`` (default False) is the method's capacity flag; it makes ``ok`` False too.
+    """
+    bad_rows = jnp.any(jnp.isnan(L) | (L == jnp.inf), axis=1)  # padded rows are inert: never bad
+    bad = jnp.any(bad_rows)
+    beta = jnp.where(bad_rows[:, None], jnp.nan, beta)
     beta = jnp.where(valid[:, None], beta, 0.0)
+    clutter = jnp.where(bad, jnp.nan, clutter)
+    log_normalizer = jnp.where(bad, jnp.nan, log_normalizer)
+    overflow = jnp.zeros((), bool) if overflow is None else jnp.asarray(overflow, bool)
     ok = (
         jnp.isfinite(log_normalizer)
         & jnp.all(jnp.isfinite(beta))
         & jnp.all(jnp.isfinite(clutter))
         & jnp.isfinite(residual)
+        & ~overflow
     )
     return Association(
         association_probabilities=beta,
@@ -126,6 +145,7 @@ def _result(beta, clutter, log_normalizer, residual, valid) -> Association:
         log_normalizer=log_normalizer,
         residual=residual,
         ok=ok,
+        overflow=overflow,
     )
 
 
@@ -148,7 +168,8 @@ class PDA(AbstractAssociator):
 
     ``log_normalizer`` is ``Σ_t log Σ_j e^{L_{t j}}`` over valid tracks: the log of the
     normaliser of the product of independent rows (it counts events in which two tracks share a
-    measurement). ``residual`` is 0; ``ok`` is False when a valid row has no finite entry.
+    measurement). ``residual`` is 0; ``overflow`` False; ``ok`` is False when a valid row has no
+    finite entry or holds a NaN or ``+inf`` (that row's ``β`` and ``log_normalizer`` are then NaN).
     """
 
     def __call__(
@@ -164,7 +185,7 @@ class PDA(AbstractAssociator):
         beta = jnp.where(valid[:, None], beta, 0.0)
         clutter = 1.0 - jnp.sum(beta[:, 1:], axis=0)
         log_normalizer = jnp.sum(jnp.where(valid, row, 0.0))
-        return _result(beta, clutter, log_normalizer, jnp.zeros((), L.dtype), valid)
+        return _result(beta, clutter, log_normalizer, jnp.zeros((), L.dtype), valid, L)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,14 +304,22 @@ class JPDA(AbstractAssociator):
       every track a potential root of a cluster of up to 3 tracks, plus the
       ``max_large_clusters`` largest clusters of up to ``max_cluster_tracks`` tracks). Defaults
       8 tracks, 24 measurements, 2 large clusters. A cluster beyond a cap is not truncated in
-      silence: ``ok`` is False.
+      silence: ``ok`` is False and ``overflow`` True (the marginals of the clusters beyond the
+      caps are wrong, by up to 1), and an eager call (concrete result, outside ``jit``/``vmap``)
+      warns with :class:`~jaxtrack.multitarget.CapacityWarning`.
 
     **Returns** (from ``__call__``): an :class:`~jaxtrack.association.Association` with
     ``log_normalizer = log Z`` (the scan's log likelihood ratio against "every measurement is
     clutter and no target is detected"), ``clutter_probabilities`` the exact probability that
     each measurement is clutter (1 for a column no track can take, padded or not), ``residual``
-    0, and ``ok`` False when ``Z = 0`` (no feasible event), a cluster exceeded
-    ``max_cluster_tracks``, or anything is not finite.
+    0, ``overflow`` True when a cluster exceeded a cap (``max_cluster_tracks``,
+    ``max_cluster_measurements`` or ``max_large_clusters``), and ``ok`` False when ``Z = 0`` (no
+    feasible event), ``overflow``, a valid row of ``L`` holds a NaN or ``+inf`` (that row's ``β``
+    and ``log_normalizer`` are then NaN), or anything is not finite.
+
+    **Warns:** :class:`~jaxtrack.multitarget.CapacityWarning` naming the caps to raise (or
+    :class:`LoopyBP`, which has none) when called eagerly and ``overflow`` is True. Under
+    ``jit``/``vmap`` there is no warning: read ``overflow``.
 
     Padded tracks (``valid_tracks`` False) and all-``−inf`` columns change nothing: a padded
     track is certainly missed with weight 1 and claims nothing; an all-``−inf`` column can only
@@ -322,19 +351,32 @@ class JPDA(AbstractAssociator):
     ) -> Association:
         L, valid = _prepare(log_weights, valid_tracks)
         T, M = L.shape[0], L.shape[1] - 1
+        overflow = largest = None
         if min(T, M) <= self.max_exact:
             beta, log_Z, _ = _jpda_dense(L, valid)
             ok = jnp.ones((), bool)
         else:
-            beta, log_Z, ok, _ = solve_by_cluster(
+            beta, log_Z, ok, largest, overflow = solve_by_cluster(
                 _jpda_dense, L, valid,
                 max_cluster_tracks=self.max_cluster_tracks,
                 max_cluster_measurements=self.max_cluster_measurements,
                 max_large_clusters=self.max_large_clusters,
             )
         clutter = jnp.where(jnp.isfinite(log_Z), 1.0 - jnp.sum(beta[:, 1:], axis=0), jnp.nan)
-        result = _result(beta, clutter, log_Z, jnp.zeros((), L.dtype), valid)
-        return eqx.tree_at(lambda r: r.ok, result, result.ok & ok)
+        result = _result(beta, clutter, log_Z, jnp.zeros((), L.dtype), valid, L, overflow)
+        result = eqx.tree_at(lambda r: r.ok, result, result.ok & ok)
+        if overflow is not None and is_concrete(overflow) and bool(overflow):
+            warnings.warn(
+                f"JPDA's cluster capacities were exceeded (largest cluster: {int(largest)} tracks; "
+                f"max_cluster_tracks={self.max_cluster_tracks}, max_cluster_measurements="
+                f"{self.max_cluster_measurements}, max_large_clusters={self.max_large_clusters}): the "
+                "marginals of the clusters beyond them are wrong (ok=False, overflow=True). Raise "
+                "`max_cluster_tracks`, `max_cluster_measurements` or `max_large_clusters`, or use "
+                "LoopyBP(), which has no capacity.",
+                CapacityWarning,
+                stacklevel=2,
+            )
+        return result
 
 
 def _jpda_dense(L: Array, valid: Array) -> tuple[Array, Array, Array]:
@@ -386,9 +428,10 @@ class LoopyBP(AbstractAssociator):
 
     **Arguments:**
 
-    - ``num_iters``: the number of message iterations (static). Default 50.
+    - ``num_iters``: the number of message iterations (static), a Python int ≥ 1. Default 50.
     - ``damping``: ``δ ∈ [0, 1)``; the new ``log ν`` is ``(1 − δ)·new + δ·old`` (geometric
-      damping). Default 0 (Williams & Lau's undamped iteration).
+      damping). Default 0 (Williams & Lau's undamped iteration). (``δ = 1`` would never move
+      the messages and report ``residual`` 0, "converged".)
 
     **Returns** (from ``__call__``): an :class:`~jaxtrack.association.Association` with
 
@@ -398,7 +441,10 @@ class LoopyBP(AbstractAssociator):
       ``−F_B`` at the current beliefs, ``log Z_B`` below;
     - ``residual``: ``max |Δ log ν_{j→t}|`` over gated pairs in the last iteration;
     - ``ok``: False if anything is not finite — e.g. a valid row with ``L[t, 0] = −inf``
-      (``P_D P_G = 1``), which the missed-weight normalisation cannot represent.
+      (``P_D P_G = 1``), which the missed-weight normalisation cannot represent, a valid row
+      holding NaN or ``+inf``, or a traced ``damping`` outside ``[0, 1)`` (it becomes NaN, and so
+      does every message);
+    - ``overflow``: False (no capacity).
 
     **The Bethe estimate** of the log partition function at the beliefs ``β`` and the measurement
     beliefs ``c_j``:
@@ -412,10 +458,27 @@ class LoopyBP(AbstractAssociator):
     (the Bethe free energy of the matching; the last term is minus the mutual information of the
     track and measurement variables on each edge, cf. Vontobel 2013, "The Bethe permanent of a
     nonnegative matrix", for the square case without misses).
+
+    **Raises:** :class:`~jaxtrack.InputError` at construction, naming the field, for
+    ``num_iters`` not an int ≥ 1 or a concrete ``damping`` outside ``[0, 1)`` (NaN included). A
+    traced ``damping`` (a ``LoopyBP`` passed through ``jit`` or ``vmap``) cannot be checked
+    there: out of range, it gives ``ok`` False.
     """
 
     num_iters: int = eqx.field(static=True, default=50)
-    damping: float = 0.0
+    damping: float | Float[Array, ""] = 0.0
+
+    def __check_init__(self):
+        if (isinstance(self.num_iters, (bool, np.bool_)) or not isinstance(self.num_iters, (int, np.integer))
+                or self.num_iters < 1):
+            raise InputError(f"LoopyBP needs `num_iters` a Python int >= 1; got num_iters={self.num_iters!r}.")
+        if is_concrete(self.damping):
+            d = np.asarray(self.damping, dtype=np.float64)
+            if not np.all((d >= 0.0) & (d < 1.0)):
+                raise InputError(
+                    f"LoopyBP needs 0 <= `damping` < 1 (1 would never update the messages); got "
+                    f"damping={self.damping!r}."
+                )
 
     def __call__(
         self,
@@ -427,6 +490,9 @@ class LoopyBP(AbstractAssociator):
         log_psi = L[:, 1:] - L[:, :1]
         gated = jnp.isfinite(log_psi)
         dtype = L.dtype
+        # A traced damping skipped __check_init__: out of [0, 1) it becomes NaN, so that every
+        # message, the residual and `ok` say so (a concrete one passed the check unchanged).
+        damping = nan_where_traced(jnp.asarray(self.damping, dtype), lambda d: ~((d >= 0) & (d < 1)))
 
         def track_to_measurement(log_nu):
             # log μ_{t→j} = log ψ_tj − log(1 + Σ_{j'≠j} ψ_tj' ν_j't), and the row's
@@ -441,7 +507,7 @@ class LoopyBP(AbstractAssociator):
             log_nu, _ = carry
             log_mu, _ = track_to_measurement(log_nu)
             new = measurement_to_track(log_mu)
-            new = (1.0 - self.damping) * new + self.damping * log_nu
+            new = (1.0 - damping) * new + damping * log_nu
             change = jnp.max(jnp.where(gated, jnp.abs(new - log_nu), 0.0), initial=0.0)
             return new, change
 
@@ -467,4 +533,6 @@ class LoopyBP(AbstractAssociator):
         rows = jnp.where(valid, L[:, 0] + row - jnp.sum(jnp.where(gated, b * log_nu, 0.0), axis=1), 0.0)
         edges = jnp.where(gated, jnp.exp(log_one_minus) * log_one_minus, 0.0)
         log_normalizer = jnp.sum(rows) + jnp.sum(clutter * col) + jnp.sum(edges)
-        return _result(beta, clutter, log_normalizer, residual, valid)
+        result = _result(beta, clutter, log_normalizer, residual, valid, L)
+        # Explicitly too: with no measurement (M = 0) no message carries the NaN.
+        return eqx.tree_at(lambda r: r.ok, result, result.ok & jnp.isfinite(damping))

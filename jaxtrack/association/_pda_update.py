@@ -16,9 +16,10 @@ from __future__ import annotations
 from typing import Literal
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._validation import InputError
+from .._validation import InputError, is_concrete
 from ..filters._updates import Conditioned, symmetrize
 
 PDAForm = Literal["mixture", "innovation"]
@@ -65,14 +66,22 @@ def pda_update(
       gate) are never read — they may hold anything, NaN included (a select, not a product
       with 0).
     - ``association_row``: ``β``, ``(1 + M,)``: ``β_0`` the probability that the track was not
-      detected, ``β_j`` that measurement ``j − 1`` is the track's; they should sum to 1. A row
-      of zeros (a padded track) returns the prediction.
+      detected, ``β_j`` that measurement ``j − 1`` is the track's: entries ``≥ 0`` summing to 1
+      (to ``tol = (1 + M)·max(10⁻⁹, 16·ε)``, ``ε`` the machine epsilon of ``β``'s dtype; an entry
+      down to ``−tol`` is read as rounding). A row of zeros (a padded track) returns the
+      prediction.
     - ``predicted_mean``: ``x̂⁻``, ``(n,)``; ``predicted_cov``: ``P⁻``, ``(n, n)``.
     - ``form``: ``"mixture"`` (default) or ``"innovation"`` (static).
 
-    **Returns:** ``(mean, cov)``, ``(n,)`` and ``(n, n)`` (symmetric), in the state's units.
+    **Returns:** ``(mean, cov)``, ``(n,)`` and ``(n, n)`` (symmetric), in the state's units. A
+    traced ``β`` (under ``jit``/``vmap``) that is not a probability row (a NaN or infinite entry,
+    an entry below ``−tol``, or a sum off 1 by more than ``tol``, other than the all-zero row)
+    gives NaN in every entry of both: no moment match of such a mixture is right, and a NaN is
+    caught by the tracker's and the filters' finiteness checks where a finite wrong moment would
+    pass as an answer.
 
-    **Raises:** ``InputError`` if the shapes disagree or ``form`` is unknown.
+    **Raises:** ``InputError`` if the shapes disagree or ``form`` is unknown, or, naming
+    ``association_row``, if a concrete ``β`` is not a probability row (as above).
 
     Differentiable in ``β`` and in the conditioned moments; the derivative with respect to a
     ``β_j`` that is exactly 0 is taken as 0 (its moments are not read).
@@ -100,6 +109,17 @@ def pda_update(
             f"`predicted_mean`/`predicted_cov` must have shapes ({n},)/({n}, {n}); got "
             f"{x_pred.shape}/{P_pred.shape}."
         )
+    row_dtype = jnp.asarray(association_row).dtype
+    eps = float(jnp.finfo(row_dtype if jnp.issubdtype(row_dtype, jnp.floating) else dtype).eps)
+    tol = (1 + M) * max(1e-9, 16.0 * eps)
+    if is_concrete(beta):
+        _check_row(np.asarray(beta, dtype=np.float64), tol)
+    empty = jnp.all(beta == 0.0)
+    not_a_row = (
+        ~jnp.all(jnp.isfinite(beta))
+        | jnp.any(beta < -tol)
+        | (~empty & (jnp.abs(jnp.sum(beta) - 1.0) > tol))
+    )
     b0, b = beta[0], beta[1:]
     used = b != 0.0
     # Selects, not products with β_j = 0: an unused measurement's moments may be NaN or huge.
@@ -128,6 +148,24 @@ def pda_update(
     # The products W A Wᵀ (and the sums of outer products) round asymmetrically; downstream
     # Cholesky factorisations (the next S, gating) need an exactly symmetric P.
     cov = symmetrize(cov)
-    # A padded track (β all zero) keeps its prediction rather than collapsing to 0.
-    empty = jnp.all(beta == 0.0)
-    return jnp.where(empty, x_pred, mean), jnp.where(empty, P_pred, cov)
+    # A padded track (β all zero) keeps its prediction rather than collapsing to 0; a traced row
+    # that is not a probability row gives NaN (the concrete one raised above).
+    mean = jnp.where(empty, x_pred, mean)
+    cov = jnp.where(empty, P_pred, cov)
+    return jnp.where(not_a_row, jnp.nan, mean), jnp.where(not_a_row, jnp.nan, cov)
+
+
+def _check_row(beta: np.ndarray, tol: float) -> None:
+    """``InputError`` naming ``association_row`` unless ``β`` is all zeros or a probability row."""
+    if not np.all(np.isfinite(beta)):
+        raise InputError(f"`association_row` must be finite; got {beta.tolist()}.")
+    if np.any(beta < -tol):
+        raise InputError(
+            f"`association_row` must be probabilities (>= 0); its smallest entry is {beta.min():.3g}."
+        )
+    total = float(np.sum(beta))
+    if np.any(beta != 0.0) and abs(total - 1.0) > tol:
+        raise InputError(
+            f"`association_row` must sum to 1 (or be all zeros, a padded track); it sums to "
+            f"{total!r} (tolerance {tol:.3g})."
+        )

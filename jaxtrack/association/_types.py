@@ -49,7 +49,13 @@ class Association(eqx.Module):
     - ``residual``: ``()``, the largest change of a message in the last iteration (iterative
       methods; 0 for exact ones), so a caller can see whether a fixed iteration count converged.
     - ``ok``: ``()`` bool; False when the method could not answer within its static capacity
-      (e.g. more gated measurements than an exact enumeration holds) or the result is not finite.
+      (``overflow``), the result is not finite, or a valid track's row of ``L`` holds a NaN or
+      ``+inf`` (``−inf`` is legal: gated out).
+    - ``overflow``: ``()`` bool; True exactly when a static capacity was exceeded (JPDA's
+      cluster caps ``max_cluster_tracks``, ``max_cluster_measurements``, ``max_large_clusters``),
+      so that the marginals of the clusters beyond it are wrong (``ok`` is then False too).
+      Distinct from a non-finite result. Always False for methods with no capacity (GNN, PDA,
+      LoopyBP, and JPDA on a problem small enough to solve in one piece).
     """
 
     association_probabilities: Float[Array, "T Mp1"]
@@ -57,6 +63,7 @@ class Association(eqx.Module):
     log_normalizer: Float[Array, ""]
     residual: Float[Array, ""]
     ok: Bool[Array, ""]
+    overflow: Bool[Array, ""]
 
 
 class AbstractAssociator(eqx.Module):

@@ -1,7 +1,8 @@
 """OSPA and GOSPA distances between two finite sets of points, on padded sets inside ``jit``.
 
 A set is a padded array and a mask: ``points`` ``(N, d)`` with ``valid`` ``(N,)``; padded rows
-may hold anything (NaN included) and influence neither the value nor its gradient. Both metrics
+may hold anything (NaN included) and influence neither the value nor its gradient. A VALID point
+with a NaN or infinite coordinate has no distance to anything: the metric is then NaN. Both metrics
 solve one optimal assignment with optax's lax-only Hungarian solver
 (``optax.assignment.hungarian_algorithm``) on a square cost matrix of static size
 ``S = max(N, K)``, so they compile once per padded shape and ``jax.vmap`` over runs and steps.
@@ -22,7 +23,7 @@ import numpy as np
 import optax
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from .._validation import InputError, is_concrete, nan_where_traced
+from .._validation import InputError, is_concrete
 
 
 class GOSPA(eqx.Module):
@@ -86,7 +87,8 @@ def _root(x, p):
 
 
 def _check(truth, truth_valid, estimates, estimates_valid, cutoff, order):
-    """Shapes always; the values of ``cutoff`` and ``order`` when concrete (NaN when traced)."""
+    """Shapes always; the values of ``cutoff`` and ``order``: ``InputError`` when concrete, an
+    ``equinox.error_if`` naming the argument when traced."""
     truth = jnp.asarray(truth)
     estimates = jnp.asarray(estimates)
     truth_valid = jnp.asarray(truth_valid)
@@ -116,10 +118,15 @@ def _check(truth, truth_valid, estimates, estimates_valid, cutoff, order):
             v = np.asarray(value, dtype=np.float64)
             if v.shape != () or not bool(ok(v)):
                 raise InputError(f"`{name}` must be {expected} (a scalar); got {value!r}.")
-    # A traced cutoff/order that the concrete check would reject becomes NaN (house rule,
-    # _validation.nan_where_traced): the metric is then NaN, never a silent number.
-    c = nan_where_traced(jnp.asarray(cutoff, dtype), lambda v: ~((v > 0) & (v < jnp.inf)))
-    p = nan_where_traced(jnp.asarray(order, dtype), lambda v: ~((v >= 1) & (v < jnp.inf)))
+    # A traced cutoff/order that the concrete check would reject is a run-time error naming it.
+    # Not a NaN metric (_validation.nan_where_traced): c and p are the caller's settings, the same
+    # for every run of a batch, not a per-run failure that a `throw=False` caller reads per run;
+    # a NaN distance in every run would only say "something is wrong", not what.
+    c, p = jnp.asarray(cutoff, dtype), jnp.asarray(order, dtype)
+    if not is_concrete(c):
+        c = eqx.error_if(c, ~((c > 0) & (c < jnp.inf)), "gospa/ospa: `cutoff` must be a finite c > 0.")
+    if not is_concrete(p):
+        p = eqx.error_if(p, ~((p >= 1) & (p < jnp.inf)), "gospa/ospa: `order` must be a finite p >= 1.")
     return truth.astype(dtype), truth_valid, estimates.astype(dtype), estimates_valid, c, p
 
 
@@ -135,8 +142,9 @@ def _assign(truth, truth_valid, estimates, estimates_valid, c, p, unmatched):
 
     Every entry is finite (the solver is never given inf or NaN). **Returns:** ``(within, dp,
     num_truth, num_estimates, assignment)`` where ``within`` ``(S,)`` marks the solver's valid pairs at
-    distance ``< c``, ``dp`` ``(S,)`` their ``d^p`` (0 elsewhere), and the ``(N,)`` estimate index
-    of each true point (−1: none).
+    distance ``< c``, ``dp`` ``(S,)`` their ``d^p`` (0 elsewhere; all NaN when a valid point has a
+    NaN or infinite coordinate, so that every metric built on it is NaN), and the ``(N,)``
+    estimate index of each true point (−1: none).
     """
     n_truth, n_est = truth.shape[0], estimates.shape[0]
     size = max(n_truth, n_est)
@@ -150,6 +158,10 @@ def _assign(truth, truth_valid, estimates, estimates_valid, c, p, unmatched):
 
     x, xv = pad(truth, truth_valid)
     y, yv = pad(estimates, estimates_valid)
+    # A valid point with a NaN (or infinite) coordinate: its distances are NaN (or inf − inf),
+    # `dist < c` is False, and it would pass as a missed/false point at the finite c^p/2.
+    # Padded rows are 0 here, so only valid points count.
+    nonfinite_point = ~(jnp.all(jnp.isfinite(x)) & jnp.all(jnp.isfinite(y)))
     sq = jnp.sum((x[:, None, :] - y[None, :, :]) ** 2, axis=-1)  # (S, S)
     # Euclidean distance and its p-th power with finite gradients at coincident points.
     pos = sq > 0
@@ -175,6 +187,7 @@ def _assign(truth, truth_valid, estimates, estimates_valid, c, p, unmatched):
         rows, cols = optax.assignment.hungarian_algorithm(solver_cost)
     matched = within[rows, cols]
     dp = jnp.where(matched, dist_p[rows, cols], 0.0)
+    dp = jnp.where(nonfinite_point, jnp.nan, dp)
     # The estimate of each true point (rows index truth, columns estimates; padding is never
     # `within`, so padded columns never appear).
     assignment = jnp.full((size,), -1, jnp.int32).at[rows].set(
@@ -224,7 +237,9 @@ def gospa(
     **Arguments:**
 
     - ``truth``: ``X``, ``(N, d)`` (e.g. positions in m); ``truth_valid``: bool ``(N,)``, which
-      rows are points. Invalid rows may hold anything, NaN included.
+      rows are points. Invalid rows may hold anything, NaN included; a valid row with a NaN or
+      infinite coordinate makes ``distance`` and ``localisation`` (hence the metric) NaN (the
+      counts and ``assignment`` then treat that point as unassignable and mean nothing).
     - ``estimates``: ``Y``, ``(K, d)``, same units; ``estimates_valid``: bool ``(K,)``.
     - ``cutoff``: ``c > 0``, finite, in the units of the points.
     - ``order``: ``p ≥ 1``, finite (default 2).
@@ -233,8 +248,11 @@ def gospa(
     **Returns:** a :class:`GOSPA` (distance, parts in the p-th power, counts).
 
     **Raises:** ``InputError`` naming ``alpha`` if it is not 2, ``cutoff``/``order`` outside
-    their ranges (when concrete; traced values out of range give NaN), ``estimates`` whose last
-    dimension differs from ``truth``'s, or a mask of the wrong shape or not boolean.
+    their ranges (when concrete), ``estimates`` whose last dimension differs from ``truth``'s,
+    or a mask of the wrong shape or not boolean. A traced ``cutoff``/``order`` out of range
+    (under ``jit``/``vmap``/``grad``) raises at run time through ``equinox.error_if``, with a
+    message naming it (``EquinoxRuntimeError`` or the runtime error ``jax.jit`` surfaces it as):
+    they are settings shared by every run, so a NaN metric would hide which one is wrong.
 
     ```bibtex
     @inproceedings{rahmathullah2017gospa,
@@ -315,9 +333,11 @@ def ospa(
     ``estimates_valid``, ``cutoff`` ``c > 0``, ``order`` ``p ≥ 1`` finite, default 2).
 
     **Returns:** an :class:`OSPA` (distance, localisation and cardinality components, p-th
-    roots, in the units of the points).
+    roots, in the units of the points). A valid point with a NaN or infinite coordinate makes
+    ``distance`` and ``localisation`` NaN (``cardinality`` depends on the counts only).
 
-    **Raises:** ``InputError`` as :func:`gospa` (without ``alpha``).
+    **Raises:** ``InputError`` as :func:`gospa` (without ``alpha``); a traced ``cutoff``/``order``
+    out of range raises at run time as in :func:`gospa`.
 
     ```bibtex
     @article{schuhmacher2008ospa,

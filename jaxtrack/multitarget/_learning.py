@@ -72,7 +72,9 @@ class DetectionClutterFit(eqx.Module):
     - ``num_iterations`` ``()`` int: the loop iterations (objective evaluations after the first).
     - ``converged`` ``()`` bool: stopped because the Newton decrement ``gᵀI⁻¹g/2 ≤ tol`` with ``I``
       positive definite (a maximum of the local quadratic model to within ``tol`` nats).
-    - ``ok`` ``()`` bool: the log-likelihood, its gradient and Hessian were finite at the estimate.
+    - ``ok`` ``()`` bool: the log-likelihood, its gradient and Hessian were finite at the estimate,
+      and the scans hold at least one valid measurement (with none, ``ℓ = −λVRT`` is maximised
+      at ``λ = 0`` on the boundary and does not depend on ``P_D``: there is nothing to fit).
     - ``tracker``: the input tracker with the estimates (and ``clutter_volume``) set.
     """
 
@@ -175,7 +177,9 @@ def _fit_loop(u0, tracker, z, valid, free, num_iterations, tol):
 
     i, u, v, g, H, _, _, hist, _, converged = jax.lax.while_loop(cond, body, init)
     hist = jnp.where(jnp.arange(num_iterations + 1) > i, v, hist)
-    ok = jnp.isfinite(v) & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(H))
+    # Scans that are all padding carry no information on P_D or λ (traced `valid`; a concrete
+    # one raised already): finite numbers, but no estimate.
+    ok = jnp.isfinite(v) & jnp.all(jnp.isfinite(g)) & jnp.all(jnp.isfinite(H)) & jnp.any(valid)
     return u, v, H, hist, i, converged, ok
 
 
@@ -230,8 +234,10 @@ def fit_detection_and_clutter(
     **Returns:** a :class:`DetectionClutterFit`.
 
     **Raises:** :class:`~jaxtrack.InputError` naming the argument: ``tracker`` not a
-    :class:`Tracker`, wrong shapes, no clutter volume, ``init`` out of range, an unknown name in
-    ``estimate``, ``num_iterations`` not an int ≥ 1, a negative ``tol``.
+    :class:`Tracker`, wrong shapes, a concrete ``valid`` with no True entry (every scan padding:
+    no measurement to fit to), no clutter volume, ``init`` out of range, an unknown name in
+    ``estimate``, ``num_iterations`` not an int ≥ 1, a negative ``tol``. A traced ``valid`` with
+    no True entry gives ``ok`` False instead.
 
     Example::
 
@@ -253,6 +259,11 @@ def fit_detection_and_clutter(
             f"got {jnp.shape(measurements)} and {jnp.shape(valid)} ({jnp.asarray(valid).dtype})."
         )
     check_measurement_dim(tracker, z)
+    if is_concrete(v) and not bool(np.any(np.asarray(v))):
+        raise InputError(
+            "`valid` has no True entry: every scan is padding, so there is no measurement to fit "
+            "P_D and the clutter density to (the likelihood −λV·(runs·scans) is maximised at λ = 0)."
+        )
     if clutter_volume is None:
         if tracker.clutter_volume is None:
             raise InputError(

@@ -53,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PRNGKeyArray
 
-from .._validation import InputError, as_key, check_finite, check_shape, is_concrete
+from .._validation import CapacityWarning, InputError, as_key, check_finite, check_shape, is_concrete
 from ..filters._linalg import matmul
 from ..models import AbstractStateSpaceModel, at_step
 from ..montecarlo._noise import key_words, step_normals, threefry2x32
@@ -83,10 +83,6 @@ TARGET_STREAM = 0x74617267
 DETECTION_STREAM = 0x64657465
 CLUTTER_COUNT_STREAM = 0x63636E74
 CLUTTER_POSITION_STREAM = 0x63706F73
-
-
-class CapacityWarning(UserWarning):
-    """A static capacity (e.g. ``max_measurements``) was exceeded; the excess was counted, not stored."""
 
 
 class Scenario(eqx.Module):
