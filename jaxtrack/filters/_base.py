@@ -22,7 +22,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from .._export import Exportable
 from .._validation import InputError, check_shape, covariance_ok, is_concrete
 from ..models import AbstractStateSpaceModel
-from ._linalg import all_rows, marginal_cov
+from ._linalg import all_rows, marginal_cov, normalized_squared_error
 from ._parallel import AbstractTimeScan, AutoScan, Sequential, resolve_scan
 from ._updates import (  # noqa: F401  (re-exported: the update functions' historical home)
     AbstractUpdateForm,
@@ -167,8 +167,6 @@ class AbstractFilter(eqx.Module):
 
         **Returns:** ``(nees, nis)``, two dimensionless scalars.
         """
-        from ..montecarlo._metrics import normalized_squared_error
-
         return (
             normalized_squared_error(error, marginal_cov(conditioned.cov, components)),
             normalized_squared_error(conditioned.innovation, conditioned.innovation_cov),
