@@ -4,7 +4,9 @@ Bad arguments: one line on stderr, exit status 2, nothing computed (checked in-p
 computation replaced by a tripwire, and through ``python -m jaxtrack`` for the real exit path).
 Ctrl-C: the acceptance test of the issue — `jaxtrack demo --runs 10000000` stops within 5 s of
 SIGINT with status 130 and leaves no partial file; and the Monte Carlo host loop itself sees a
-KeyboardInterrupt while rounds are queued."""
+KeyboardInterrupt while rounds are queued. Ctrl-C at any time: `jaxtrack reproduce multitarget`
+interrupted at 1, 5 and 15 s, inside a garbage-collector callback (where Python discards a
+KeyboardInterrupt), and in a command that swallows it (the watchdog of jaxtrack/cli/_interrupt.py)."""
 
 import os
 import re
@@ -197,3 +199,184 @@ def test_interrupted_writes_leave_no_file(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         write_figures(tmp_path, [("a.png", ok), ("b.png", interrupted)])
     assert [p.name for p in tmp_path.iterdir()] == ["a.png"] and (tmp_path / "a.png").stat().st_size > 1000
+
+
+# Ctrl-C at any time (issue: a Ctrl-C in the first seconds of `jaxtrack reproduce` was printed as
+# "Exception ignored in: <function _xla_gc_callback …>" and the study ran on). JAX calls
+# `_xla_gc_callback` from `gc.callbacks`; a KeyboardInterrupt raised in it is discarded.
+# jaxtrack/cli/_interrupt.py delivers such an interrupt again outside the callback, and ends a
+# command still running 3 s after Ctrl-C (or at a second Ctrl-C) with status 130.
+
+class _Child:
+    """A command-line child process with its stderr collected by a thread."""
+
+    def __init__(self, args, **kw):
+        self.t_start = time.perf_counter()
+        self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, **kw)
+        self.chunks = []
+        self.reader = threading.Thread(
+            target=lambda: self.chunks.extend(iter(lambda: self.proc.stderr.read(1), "")), daemon=True)
+        self.reader.start()
+
+    @property
+    def err(self) -> str:
+        return "".join(self.chunks)
+
+    def wait_for(self, marker: str, at_least_s: float = 0.0, limit_s: float = 120.0) -> None:
+        """Wait until ``marker`` is on stderr and ``at_least_s`` have passed since the start."""
+        while time.perf_counter() - self.t_start < at_least_s or marker not in self.err:
+            assert self.proc.poll() is None, f"ended before {marker!r} at {at_least_s} s: {self.err}"
+            assert time.perf_counter() - self.t_start < limit_s, self.err
+            time.sleep(0.02)
+
+    def interrupt(self, stop_within_s: float, signals: int = 1) -> float:
+        """SIGINT (``signals`` times, 0.3 s apart); the seconds from the last one to the exit (None: still running)."""
+        assert self.proc.poll() is None, self.err  # still running: the Ctrl-C is what ends it
+        for i in range(signals):
+            if i:
+                time.sleep(0.3)
+            self.proc.send_signal(signal.SIGINT)
+        t0 = time.perf_counter()
+        try:
+            self.proc.wait(timeout=stop_within_s)
+            return time.perf_counter() - t0
+        except subprocess.TimeoutExpired:
+            return None
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.reader.join(timeout=5)
+        self.proc.stderr.close()
+
+
+def _assert_interrupted(child, latency, out=None):
+    err = child.err
+    assert latency is not None, f"still running after Ctrl-C: {err[-2000:]}"
+    assert child.proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "jaxtrack: interrupted", err
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    if out is not None:
+        assert (list(out.rglob("*")) if out.exists() else []) == []
+
+
+@pytest.mark.parametrize("at_s", [1, 5, 15])
+def test_ctrl_c_stops_the_multitarget_study_at_any_time(tmp_path, sigint_raises, at_s):
+    # The study takes ~40 s warm (minutes cold). At 1 s it is importing JAX, SciPy and equinox
+    # (on a loaded 2-core machine, 0.7-3 s after the start, the old command line lost 5 of 6 such
+    # Ctrl-Cs in JAX's gc callback), at 5 s importing, tracing or compiling, at 15 s compiling or
+    # running. Bound: 3 s of grace at most, plus a loaded machine.
+    out = tmp_path / "mt"
+    child = _Child([sys.executable, "-m", "jaxtrack", "reproduce", "multitarget", "--out", str(out)])
+    try:
+        child.wait_for("", at_least_s=at_s)
+        latency = child.interrupt(stop_within_s=10)
+    finally:
+        child.close()
+    print(f"reproduce multitarget, Ctrl-C at {at_s} s: exit {child.proc.returncode} after {latency} s")
+    _assert_interrupted(child, latency, out)
+
+
+# A child that runs the command line with a slow garbage-collector callback ahead of JAX's, so
+# that a SIGINT is all but certainly acted on inside a callback: the lost-interrupt case, every time.
+_SLOW_GC = """
+import gc, sys, time
+import jaxtrack.cli as cli
+def slow(phase, info):
+    time.sleep(0.02)
+gc.callbacks.insert(0, slow)
+print("child: ready", file=sys.stderr, flush=True)
+sys.argv[1:] = ["reproduce", "multitarget", "--out", sys.argv[1]]
+sys.exit(cli.main())
+"""
+
+
+def test_ctrl_c_inside_a_garbage_collector_callback_is_not_lost(tmp_path, sigint_raises):
+    out = tmp_path / "mt"
+    child = _Child([sys.executable, "-c", _SLOW_GC, str(out)])
+    try:
+        child.wait_for("child: ready", at_least_s=2)
+        latency = child.interrupt(stop_within_s=10)
+    finally:
+        child.close()
+    print(f"Ctrl-C inside a collector callback: exit {child.proc.returncode} after {latency} s")
+    _assert_interrupted(child, latency, out)
+
+
+# A child whose command swallows every KeyboardInterrupt (as a C++ frame may): only the watchdog
+# can end it, 3 s after the first Ctrl-C, or at once on a second one.
+_SWALLOW = """
+import sys, time
+import jaxtrack.cli as cli
+def swallow(args):
+    print("child: running", file=sys.stderr, flush=True)
+    while True:
+        try:
+            time.sleep(0.05)
+        except BaseException:
+            pass
+cli._run = swallow
+sys.argv[1:] = ["demo", "--out", sys.argv[1]]
+sys.exit(cli.main())
+"""
+
+
+@pytest.mark.parametrize("signals", [1, 2])
+def test_ctrl_c_swallowed_by_the_command_still_ends_it(tmp_path, sigint_raises, signals):
+    child = _Child([sys.executable, "-c", _SWALLOW, str(tmp_path / "demo")])
+    try:
+        child.wait_for("child: running")
+        latency = child.interrupt(stop_within_s=10, signals=signals)
+    finally:
+        child.close()
+    print(f"{signals} Ctrl-C to a command that swallows them: exit {child.proc.returncode} after {latency} s")
+    _assert_interrupted(child, latency)
+    if signals == 1:
+        assert latency > 2.0  # the watchdog's 3 s of grace (less the time to send the signal)
+    else:
+        assert latency < 2.0  # the second Ctrl-C: at once
+
+
+def test_guard_delivers_a_discarded_interrupt_again(sigint_raises):
+    # In-process, the watchdog's exit replaced: a SIGINT acted on in a __del__ (where Python
+    # discards the KeyboardInterrupt) and one acted on inside a gc callback (where the handler
+    # puts it off) both reach the main thread shortly after. One SIGINT per guard (a second
+    # would be a second Ctrl-C).
+    import gc
+
+    from jaxtrack.cli import _interrupt
+
+    class Drop:
+        def __del__(self):
+            signal.raise_signal(signal.SIGINT)
+            sum(range(10))  # bytecode after the signal: the handler runs here, in __del__
+
+    def gc_callback(phase, info):
+        gc.callbacks.remove(gc_callback)  # once
+        signal.raise_signal(signal.SIGINT)
+        sum(range(10))
+
+    def collect():
+        gc.callbacks.append(gc_callback)
+        gc.collect()
+
+    for trigger, where in [(Drop, "__del__"), (collect, "gc callback")]:
+        ended = []
+        guard = _interrupt.install(grace_s=60, exit_fn=ended.append)
+        assert guard is not None
+        try:
+            t0 = time.perf_counter()
+            with pytest.raises(KeyboardInterrupt):
+                trigger()
+                while time.perf_counter() - t0 < 5:
+                    time.sleep(0.005)
+            latency = time.perf_counter() - t0
+        finally:
+            guard.uninstall()
+            if gc_callback in gc.callbacks:
+                gc.callbacks.remove(gc_callback)
+        print(f"{where}: delivered again after {latency:.3f} s")
+        assert (guard.deferred, guard.delivered, ended) == (1, 1, []), where
+        assert latency < 5 and gc.isenabled()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

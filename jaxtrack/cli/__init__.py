@@ -7,7 +7,9 @@
 Arguments are checked before any computation (types, ranges, a writable ``--out``): a bad one
 gives a one-line error on stderr and exit status 2. Ctrl-C stops a command within about a second
 of device work, prints ``jaxtrack: interrupted`` and exits with status 130; files are written to
-a temporary name and renamed, so an interrupted command leaves no partial file.
+a temporary name and renamed, so an interrupted command leaves no partial file. A Ctrl-C that
+would be lost (inside JAX's garbage-collector callback) is delivered again, and a command still
+running 3 s after Ctrl-C, or given a second Ctrl-C, is ended with status 130 (``_interrupt``).
 """
 
 from __future__ import annotations
@@ -125,6 +127,37 @@ def main(argv: list[str] | None = None) -> int:
     **Returns:** 0 on success, 1 when ``reproduce`` misses a paper number, 2 for a bad argument
     (one line on stderr, nothing computed), 130 on Ctrl-C.
     """
+    # The command line proper (argv None) takes Ctrl-C over before anything heavy is imported:
+    # JAX's garbage-collector callback would otherwise swallow a KeyboardInterrupt (_interrupt).
+    guard = None
+    if argv is None:
+        from . import _interrupt
+
+        guard = _interrupt.install()
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        return _interrupted(argv)
+    except Exception:
+        # A Ctrl-C that reached us as another error (raised inside a callback that XLA wraps).
+        if guard is not None and guard.requested:
+            return _interrupted(argv)
+        raise
+
+
+def _interrupted(argv) -> int:
+    print("jaxtrack: interrupted", file=sys.stderr)
+    if argv is None:
+        # The command line proper: leave at once. A normal interpreter exit waits on (and
+        # has crashed in) JAX's compiler and device threads torn down mid-call; the files
+        # have been cleaned up already (they are written to temporary names and renamed).
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
+    return 130
+
+
+def _main(argv) -> int:
     parser = _parser()
     try:
         args = parser.parse_args(argv)
@@ -158,16 +191,6 @@ def main(argv: list[str] | None = None) -> int:
         return _run(args)
     except InputError as exc:  # a value that only the computation could judge (e.g. a Newton step)
         return fail(prog, str(exc).splitlines()[0])
-    except KeyboardInterrupt:
-        print("jaxtrack: interrupted", file=sys.stderr)
-        if argv is None:
-            # The command line proper: leave at once. A normal interpreter exit waits on (and
-            # has crashed in) JAX's compiler and device threads torn down mid-call; the files
-            # have been cleaned up already (they are written to temporary names and renamed).
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(130)
-        return 130
 
 
 if __name__ == "__main__":

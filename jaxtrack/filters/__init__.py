@@ -1,7 +1,8 @@
 """Gaussian filters and smoothers: one predict/update pair per family, one step, one ``lax.scan``.
 
 - ``_updates``: the two measurement updates (linearised, moments) and the update forms;
-- ``_base``: :class:`AbstractFilter` (``init``/``step``), :class:`FilterState`, :func:`run_filter`;
+- ``_base``: :class:`AbstractFilter` (``init``/``step``), :class:`FilterState`, :class:`FilterResult`;
+  ``_run``: :func:`run_filter` (above ``_base`` and ``_parallel``);
 - ``_kalman``, ``_unscented``: the filter families; ``_smoother``: RTS;
 - ``_batch``: many runs at once, with the covariance strategy (shared or per run);
 - ``_parallel``: how a run traverses time (``scan=``): sequential, or parallel-in-time;
@@ -13,7 +14,6 @@ from ._base import (
     FilterResult as FilterResult,
     FilterState as FilterState,
     StepOutput as StepOutput,
-    run_filter as run_filter,
 )
 from ._batch import (
     AbstractCovarianceStrategy as AbstractCovarianceStrategy,
@@ -30,6 +30,7 @@ from ._parallel import (
     ParallelInTime as ParallelInTime,
     Sequential as Sequential,
 )
+from ._run import run_filter as run_filter
 from ._kalman import (
     ExtendedKalmanFilter as ExtendedKalmanFilter,
     KalmanFilter as KalmanFilter,

@@ -189,6 +189,20 @@ def cholesky_and_inverse(a: Float[Array, "d d"]) -> tuple[Float[Array, "d d"], F
     return L, tril_inverse(L)
 
 
+def normalized_squared_error(error: Array, cov: Array) -> Array:
+    """``eᵀ P⁻¹ e`` for one error ``(d,)`` and covariance ``(d, d)``: NEES or NIS.
+
+    The formula behind :func:`jaxtrack.montecarlo.normalized_squared_error` (documented there)
+    and :meth:`jaxtrack.filters.AbstractFilter.consistency`; here, below both, so that the
+    filters do not import the Monte Carlo layer. ``e`` is whitened by a product with ``L⁻¹``
+    (``L`` the Cholesky factor of ``P``), not a triangular solve: under ``jax.vmap`` with a
+    covariance shared by the batch only the product is batched.
+    """
+    _, chol_inv = cholesky_and_inverse(cov)
+    whitened = matmul(chol_inv, error)
+    return whitened @ whitened
+
+
 def sum_rows(a: Array) -> Array:
     """``a.sum(axis=0)`` over a few rows, as adds: on CPU a reduction over a short leading axis
     is a separate, slow kernel, while adds fuse with the rest of the step.

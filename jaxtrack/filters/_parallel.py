@@ -18,7 +18,7 @@ step calls, so both strategies return the same fields with the same meaning (tes
 from __future__ import annotations
 
 import abc
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -27,11 +27,9 @@ from jaxtyping import Array
 
 from .._validation import InputError
 from ..models import AbstractStateSpaceModel, LinearGaussianModel
+from ._base import AbstractFilter, FilterResult, _scan_filter
 from ._linalg import cholesky_and_inverse, matmul
 from ._updates import symmetrize
-
-if TYPE_CHECKING:
-    from ._base import AbstractFilter, FilterResult
 
 # AutoScan on a GPU/TPU: parallel from this many steps on. A rule, not a measurement (no
 # accelerator was available when it was set): a sequential step on a GPU is a few kernel
@@ -84,8 +82,6 @@ class Sequential(AbstractTimeScan):
         return self
 
     def filter_pass(self, filter, model, measurements, observed, first_step, save):
-        from ._base import _scan_filter
-
         return _scan_filter(filter, model, measurements, observed, first_step, save)
 
     def smoother_pass(self, model, filtered):
@@ -397,8 +393,6 @@ def _filter_operator(earlier: _FilterElement, later: _FilterElement) -> _FilterE
 
 def _parallel_filter(filter, model, z, observed, first_step, save) -> FilterResult:
     """:class:`ParallelInTime`'s forward pass (traced inside ``run_filter``'s jit)."""
-    from ._base import FilterResult
-
     T, n = z.shape[0], model.state_dim
     dtype = model.initial_cov.dtype
     ks = jnp.arange(T, dtype=jnp.int32)

@@ -10,9 +10,10 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._export import Exportable
 from ..models import AbstractStateSpaceModel
-from ._base import AbstractFilter, FilterResult, FirstStep, run_filter, symmetrize
+from ._base import AbstractFilter, FilterResult, FirstStep, symmetrize
 from ._kalman import KalmanFilter
 from ._parallel import AbstractTimeScan, AutoScan, Sequential, resolve_scan
+from ._run import run_filter
 
 
 class SmootherResult(Exportable, eqx.Module):

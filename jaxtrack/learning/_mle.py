@@ -58,7 +58,8 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 
 from .._validation import InputError
-from ..filters._base import AbstractFilter, FirstStep, check_run_arguments, run_filter
+from ..filters._base import AbstractFilter, FirstStep, check_run_arguments
+from ..filters._run import run_filter
 from ..filters._kalman import KalmanFilter
 from ..models import AbstractStateSpaceModel
 from ._lbfgs import LBFGS

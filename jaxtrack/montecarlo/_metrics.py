@@ -10,7 +10,7 @@ import scipy.stats
 from jaxtyping import Array, ArrayLike
 
 from .._validation import InputError
-from ..filters._linalg import cholesky_and_inverse, matmul
+from ..filters._linalg import normalized_squared_error as _normalized_squared_error
 
 
 def normalized_squared_error(error: Array, cov: Array) -> Array:
@@ -27,9 +27,10 @@ def normalized_squared_error(error: Array, cov: Array) -> Array:
 
     **Returns:** ``eᵀ P⁻¹ e``, a scalar (dimensionless).
     """
-    _, chol_inv = cholesky_and_inverse(cov)
-    whitened = matmul(chol_inv, error)
-    return whitened @ whitened
+    # The formula lives in the filters layer (jaxtrack.filters._linalg), which scores its own
+    # steps with it (AbstractFilter.consistency) and must not import this one. A function of
+    # this module, not a bare re-export, so that it stays documented and owned here.
+    return _normalized_squared_error(error, cov)
 
 
 def chi2_mean_bounds(dof: ArrayLike, num_runs: int, confidence: float = 0.95) -> np.ndarray:
