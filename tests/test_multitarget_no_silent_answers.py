@@ -111,3 +111,14 @@ def test_a_jpda_cluster_beyond_its_caps_is_counted_and_warned(case):
     assert failures > 0 and failures == int(np.sum(~np.asarray(result.ok)))
     assert int(tracker.capacity_events(result.final)) >= failures
     assert any(issubclass(w.category, CapacityWarning) and "association" in str(w.message) for w in caught)
+
+
+def test_a_step_jitted_by_hand_compiles(case):
+    """``jax.jit(lambda s, z, v: tracker.step(s, z, v))`` (the tracker closed over): its parameter
+    checks used to inspect a staged comparison and raised TracerArrayConversionError."""
+    _, _, methods, z, v = case
+    tracker = methods["jpda"]
+    step = jax.jit(lambda s, zz, vv: tracker.step(s, zz, vv))
+    by_hand, info = step(tracker.init(), z[0], v[0])
+    filtered, _ = eqx.filter_jit(tracker.step)(tracker.init(), z[0], v[0])
+    assert bool(info.ok) and eqx.tree_equal(by_hand, filtered)

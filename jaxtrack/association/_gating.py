@@ -75,7 +75,9 @@ def _checked_probability(name: str, x, dtype, *, open_low: bool, shapes) -> Arra
         return ~((v > 0.0 if open_low else v >= 0.0) & (v <= 1.0))
 
     if is_concrete(x):
-        if np.any(np.asarray(bad(x))):
+        # Checked in NumPy: under jit a concrete (closed-over) value's jnp comparison is staged as
+        # a tracer, which cannot be inspected here (a tracker's step jitted by hand hit this).
+        if np.any(bad(np.asarray(x))):
             interval = "(0, 1]" if open_low else "[0, 1]"
             raise InputError(f"`{name}` must be in {interval}; got {np.asarray(x)}.")
         return x

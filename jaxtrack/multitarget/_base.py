@@ -24,9 +24,10 @@ the state components) is the single-target model's: ``model.state_layout``, e.g.
 
 Manual stepping, as with a single-target filter::
 
-    state = method.init()
+    step = equinox.filter_jit(method.step)      # compiled once; a bound method of a Module
+    state = method.init()                       # is a pytree: filter_jit, not jax.jit
     for z, v in zip(scans.measurements, scans.valid):     # (M, m), (M,)
-        state, info = method.step(state, z, v)
+        state, info = step(state, z, v)
         states, mask, ids = method.estimates(state)
 """
 
