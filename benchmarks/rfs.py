@@ -152,7 +152,7 @@ def make_phd(model, capacity, reduction):
 
 def make_cphd(model, capacity):
     return GMCPHD(KalmanFilter(), model, prob_survival=P_S, prob_detect=P_D, clutter_rate=CLUTTER_RATE,
-                  clutter_spatial_density=1.0 / AREA, birth=GaussianMixture([BIRTH_W], [BIRTH_M], [BIRTH_P]),
+                  clutter_volume=AREA, birth=GaussianMixture([BIRTH_W], [BIRTH_M], [BIRTH_P]),
                   capacity=capacity, max_cardinality=MAX_CARDINALITY, reduction=VoMaReduction(PRUNE, MERGE))
 
 

@@ -29,6 +29,11 @@ class CapacityWarning(UserWarning):
     """
 
 
+# Its public home: warnings print it as jaxtrack.multitarget.CapacityWarning, where the docs and
+# the multi-target layer's __all__ place it (as before it moved down here).
+CapacityWarning.__module__ = "jaxtrack.multitarget"
+
+
 def is_concrete(x) -> bool:
     """True when ``x`` holds a value that can be inspected now (not a tracer).
 

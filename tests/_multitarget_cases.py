@@ -48,7 +48,7 @@ def methods(scen, s):
     return {
         "phd": GMPHD(kf, scen.model, clutter_density=s.clutter_density, capacity=24, **common),
         "cphd": GMCPHD(kf, scen.model, clutter_rate=s.clutter_rate,
-                       clutter_spatial_density=s.clutter_density / s.clutter_rate, capacity=24,
+                       clutter_density=s.clutter_density, capacity=24,
                        max_cardinality=12, **common),
         "pmb": PMB(kf, scen.model, associator=JPDA(max_cluster_tracks=6, max_large_clusters=2), **common, **mb),
         "pmbm": PMBM(kf, scen.model, max_hypotheses=4, assignment_rows=8, assignment_tracks=12, **common, **mb),

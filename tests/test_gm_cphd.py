@@ -39,7 +39,7 @@ T, M_MAX = 3, 4
 
 def _cphd(**kwargs):
     model = LinearGaussianModel(F_CV, Q_CV, H_CV, R_CV, B_MEAN, B_COV)
-    args = {"prob_survival": PS, "prob_detect": PD, "clutter_rate": LAM, "clutter_spatial_density": C,
+    args = {"prob_survival": PS, "prob_detect": PD, "clutter_rate": LAM, "clutter_volume": 400.0,  # c = 1/V = C
             "birth_weights": [BIRTH_W], "birth_means": [B_MEAN], "birth_covs": [B_COV],
             "birth_cardinality": BIRTH_CARD, "capacity": CAPACITY, "max_cardinality": N_MAX,
             "prune_threshold": 0.0, "merge_threshold": 0.0}
@@ -249,8 +249,9 @@ def test_gradient_matches_central_differences():
     [
         ({"prob_detect": 0.0}, "prob_detect"),
         ({"clutter_rate": -1.0}, "clutter_rate"),
-        ({"clutter_spatial_density": 0.0}, "clutter_spatial_density"),
-        ({"clutter_density": 1e-3}, "clutter_spatial_density"),  # both given
+        ({"clutter_volume": 0.0}, "clutter_volume"),
+        ({"clutter_density": 1e-3}, "clutter_volume"),  # both given
+        ({"clutter_spatial_density": 1e-3}, "clutter_spatial_density"),  # meant c = 1/V up to 0.1.0: refused
         ({"max_cardinality": 0}, "max_cardinality"),
         ({"birth_cardinality": [0.5, 0.4]}, "birth_cardinality"),  # not a pmf
         ({"birth_cardinality": [0.5, 0.5]}, "birth_cardinality"),  # mean 0.5, birth mass 0.4

@@ -122,3 +122,37 @@ def test_a_step_jitted_by_hand_compiles(case):
     by_hand, info = step(tracker.init(), z[0], v[0])
     filtered, _ = eqx.filter_jit(tracker.step)(tracker.init(), z[0], v[0])
     assert bool(info.ok) and eqx.tree_equal(by_hand, filtered)
+
+
+def test_one_clutter_vocabulary_across_the_constructors(case):
+    """``clutter_density`` κ, Stone Soup's ``clutter_spatial_density`` κ, or ``clutter_rate`` λ with
+    ``clutter_volume`` V build the same method; contradictions and doubles are refused by name."""
+    from jaxtrack.multitarget import GMCPHD, PMB
+
+    scen, s, methods, _, _ = case
+    kappa, rate, volume = float(scen.clutter_density), float(scen.clutter_rate), float(scen.clutter_volume)
+    assert kappa == rate / volume and float(scen.clutter_spatial_density) == kappa
+    common = dict(prob_survival=0.99, prob_detect=0.9, birth=s.birth)
+    init = OnePointInitiator(np.asarray(s.birth_means[0]), np.asarray(s.birth_covs[0]))
+    builders = {
+        "Tracker": lambda **c: Tracker(KalmanFilter(), scen.model, JPDA(), init, prob_detect=0.9, capacity=8, **c),
+        "GMPHD": lambda **c: GMPHD(KalmanFilter(), scen.model, capacity=8, **common, **c),
+        "PMB": lambda **c: PMB(KalmanFilter(), scen.model, max_tracks=8, **common, **c),
+        "PMBM": lambda **c: PMBM(KalmanFilter(), scen.model, max_tracks=8, max_hypotheses=2, **common, **c),
+    }
+    for name, build in builders.items():
+        forms = [build(clutter_density=kappa), build(clutter_spatial_density=kappa),
+                 build(clutter_rate=rate, clutter_volume=volume)]
+        assert all(float(f.clutter_density) == kappa for f in forms), name
+        with pytest.raises(InputError, match="clutter_spatial_density"):
+            build(clutter_density=kappa, clutter_spatial_density=kappa)
+        with pytest.raises(InputError, match="clutter_rate"):
+            build(clutter_density=2 * kappa, clutter_rate=rate, clutter_volume=volume)
+        with pytest.raises(InputError, match="clutter_density"):
+            build()
+    cphd = [GMCPHD(KalmanFilter(), scen.model, capacity=8, max_cardinality=4, clutter_rate=rate, **common, **c)
+            for c in (dict(clutter_density=kappa), dict(clutter_volume=volume))]
+    assert np.isclose(float(cphd[0].clutter_pdf), float(cphd[1].clutter_pdf), rtol=1e-15)
+    with pytest.raises(InputError, match="clutter_spatial_density"):  # meant 1/V up to 0.1.0
+        GMCPHD(KalmanFilter(), scen.model, capacity=8, max_cardinality=4, clutter_rate=rate,
+               clutter_spatial_density=kappa, **common)

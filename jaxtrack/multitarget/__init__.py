@@ -89,8 +89,9 @@ from ._multibernoulli import (
     PMBMStepInfo as PMBMStepInfo,
     run_pmbm as run_pmbm,
 )
-from ._pmbm import PMBM as PMBM
-from ._pmb import PMB as PMB
+from ._multibernoulli import AbstractGlobalHypotheses as AbstractGlobalHypotheses
+from ._pmbm import PMBM as PMBM, RankedAssignment as RankedAssignment
+from ._pmb import PMB as PMB, MarginalProjection as MarginalProjection
 from ._tracker import (
     CONFIRMED as CONFIRMED,
     EMPTY as EMPTY,
@@ -154,6 +155,9 @@ __all__ = [
     "run_cphd",
     "PMBM",
     "PMB",
+    "AbstractGlobalHypotheses",
+    "RankedAssignment",
+    "MarginalProjection",
     "PMBMState",
     "PMBMStepInfo",
     "PMBMResult",

@@ -211,10 +211,13 @@ class GMCPHD(AbstractGaussianMixtureFilter):
     ``gate``, ``max_estimates``):
 
     - ``max_cardinality``: ``N_max``, the largest number of targets the cardinality pmf holds (static).
-    - ``clutter_rate``: ``λ``, the Poisson mean number of clutter points per scan, ``>= 0``.
-    - ``clutter_spatial_density``: ``c(z) = 1/V``, per unit measurement-space volume (e.g. 1/m²),
-      ``> 0``; or instead ``clutter_density``: ``κ = λ c`` as the GM-PHD takes it (needs ``λ > 0``).
-      Exactly one of the two.
+    - ``clutter_rate``: ``λ``, the Poisson mean number of clutter points per scan, ``>= 0``;
+      with ``clutter_volume``: ``V``, the clutter region's measure (the clutter points' density
+      over measurement space is ``c(z) = 1/V``), or ``clutter_density``: ``κ = λ/V`` as every
+      multi-target method takes it (needs ``λ > 0``; :mod:`._clutter` gives the vocabulary).
+      ``clutter_spatial_density`` (Stone Soup's name of ``κ``) is refused for one release: up to
+      jaxtrack 0.1.0 the GM-CPHD read it as ``c = 1/V``, and taking it as ``κ`` now would change a
+      result without a word.
     - ``birth_cardinality``: ``p_Γ(n)``, ``n = 0..L−1`` with ``L <= N_max + 1``, summing to 1 with
       mean ``Σ birth.weights`` (an i.i.d. cluster birth); default: Poisson with mean
       ``Σ birth.weights`` (its mass above ``N_max`` counts as truncated at every scan).
@@ -233,14 +236,14 @@ class GMCPHD(AbstractGaussianMixtureFilter):
     reduction's prune and merge decisions do not flip.
 
     **Raises:** :class:`~jaxtrack.InputError` naming the argument (as :class:`GMPHD`, and a
-    ``max_cardinality`` below 1, a negative ``clutter_rate``, a non-positive spatial density, both or
+    ``max_cardinality`` below 1, a negative ``clutter_rate``, a non-positive clutter volume, both or
     neither clutter density, a ``birth_cardinality`` that is not a pmf or whose mean is not
     ``Σ birth_weights``).
 
-    Example (as :class:`GMPHD`'s, with the clutter as a rate and a spatial density)::
+    Example (as :class:`GMPHD`'s, with the clutter as a rate over a region of 200 m × 200 m)::
 
         cphd = GMCPHD(KalmanFilter(), model, prob_survival=0.99, prob_detect=0.9,
-                      clutter_rate=10.0, clutter_spatial_density=1 / 200.0**2,
+                      clutter_rate=10.0, clutter_volume=200.0**2,
                       birth=GaussianMixture([0.1], [m_b], [P_b]), capacity=50, max_cardinality=30)
         result = run_cphd(cphd, scans.measurements, scans.valid)
         result.cardinality_pmf      # (T, 31)
@@ -262,7 +265,7 @@ class GMCPHD(AbstractGaussianMixtureFilter):
     prob_survival: Float[Array, ""]
     prob_detect: Float[Array, ""]
     clutter_rate: Float[Array, ""]
-    clutter_spatial_density: Float[Array, ""]
+    clutter_pdf: Float[Array, ""]
     birth: GaussianMixture
     birth_cardinality: Float[Array, " N1"]
     birth_tail: Float[Array, ""]
@@ -286,8 +289,9 @@ class GMCPHD(AbstractGaussianMixtureFilter):
         birth: GaussianMixture | None = None,
         capacity: int,
         max_cardinality: int,
-        clutter_spatial_density: ArrayLike | None = None,
+        clutter_volume: ArrayLike | None = None,
         clutter_density: ArrayLike | None = None,
+        clutter_spatial_density: ArrayLike | None = None,
         birth_cardinality: ArrayLike | None = None,
         reduction: VoMaReduction | None = None,
         truncation_tolerance: ArrayLike = 1e-9,
@@ -312,16 +316,21 @@ class GMCPHD(AbstractGaussianMixtureFilter):
             setattr(self, name, value)
         N = self.max_cardinality = _positive_int("max_cardinality", max_cardinality)  # N_max
         self.clutter_rate = _scalar("clutter_rate", clutter_rate, low=0.0)
-        if (clutter_spatial_density is None) == (clutter_density is None):
-            raise InputError("give exactly one of `clutter_spatial_density` (c = 1/V) and `clutter_density` (κ = λc).")
+        if clutter_spatial_density is not None:
+            raise InputError(
+                "GMCPHD: `clutter_spatial_density` was read as c = 1/V up to jaxtrack 0.1.0; jaxtrack now uses Stone Soup's "
+                "meaning everywhere (κ = λ/V, points per unit volume per scan), so it is refused for one release "
+                "rather than silently reread: pass `clutter_volume=V` (c = 1/V) or `clutter_density=κ`.")
+        if (clutter_volume is None) == (clutter_density is None):
+            raise InputError("GMCPHD: give `clutter_rate` with exactly one of `clutter_volume` (V, c = 1/V) and "
+                             "`clutter_density` (κ = λ/V).")
         if clutter_density is not None:
             kappa = _scalar("clutter_density", clutter_density, low=0.0, open_low=True)
             if is_concrete(self.clutter_rate) and not float(self.clutter_rate) > 0.0:
-                raise InputError("`clutter_density` needs `clutter_rate` > 0 (c = κ/λ); give `clutter_spatial_density`.")
-            self.clutter_spatial_density = kappa / self.clutter_rate
+                raise InputError("`clutter_density` needs `clutter_rate` > 0 (c = κ/λ); give `clutter_volume`.")
+            self.clutter_pdf = kappa / self.clutter_rate
         else:
-            self.clutter_spatial_density = _scalar("clutter_spatial_density", clutter_spatial_density, low=0.0,
-                                                   open_low=True)
+            self.clutter_pdf = 1.0 / _scalar("clutter_volume", clutter_volume, low=0.0, open_low=True)
         self.truncation_tolerance = _scalar("truncation_tolerance", truncation_tolerance, low=0.0)
         mu = jnp.sum(self.birth_weights)
         if birth_cardinality is None:
@@ -392,7 +401,7 @@ class GMCPHD(AbstractGaussianMixtureFilter):
         """
         w, m, P, active, _ = predicted
         loglik, pair, cond = _pair_likelihoods(self, m, P, active, measurements, valid, k)
-        pd, lam, c = self.prob_detect, self.clutter_rate, self.clutter_spatial_density
+        pd, lam, c = self.prob_detect, self.clutter_rate, self.clutter_pdf
         w = jnp.where(active, w, 0.0)
         log_w = _log(w)
         mass = jnp.sum(w)  # N_{k|k-1} = ⟨1, v⟩

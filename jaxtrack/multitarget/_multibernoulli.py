@@ -10,6 +10,7 @@ Aerosp. Electron. Syst. 54(4), 1883-1901 (G18), described in :mod:`._pmbm`.
 
 from __future__ import annotations
 
+import abc
 import warnings
 from typing import ClassVar, NamedTuple
 
@@ -369,6 +370,30 @@ def _finish(f, state, *, existence, means, covs, local_active, table, log_w, hyp
 
 
 
+class AbstractGlobalHypotheses(eqx.Module):
+    """How a multi-Bernoulli filter's update forms its global hypotheses: the strategy that makes a
+    :class:`~jaxtrack.multitarget.PMBM` (the ``H`` best hypotheses by ranked assignment,
+    :class:`~jaxtrack.multitarget.RankedAssignment`) or a :class:`~jaxtrack.multitarget.PMB` (one
+    hypothesis, the posterior projected through association marginals,
+    :class:`~jaxtrack.multitarget.MarginalProjection`). Everything else of the two filters —
+    prediction, the Poisson part, new tracks, pruning, estimates — is shared.
+
+    ``max_hypotheses``: ``H``, the global hypotheses the state holds (static int).
+    ``update(filter, state, measurements, valid) -> (state, PMBMStepInfo)``: the update of the
+    predicted ``state`` of ``filter`` on one padded scan. ``check(filter)``: raise
+    :class:`~jaxtrack.InputError` when ``filter``'s settings do not suit the strategy.
+    """
+
+    max_hypotheses: eqx.AbstractVar[int]
+
+    @abc.abstractmethod
+    def update(self, f, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
+        """One scan's update of ``f``'s predicted ``state``."""
+
+    def check(self, f) -> None:
+        """Nothing to check by default."""
+
+
 class AbstractMultiBernoulliFilter(AbstractGaussianMixtureFilter):
     """What the PMBM (:class:`~jaxtrack.multitarget.PMBM`) and the PMB
     (:class:`~jaxtrack.multitarget.PMB`) share: the configuration fields (documented on each) and
@@ -387,8 +412,13 @@ class AbstractMultiBernoulliFilter(AbstractGaussianMixtureFilter):
     gate: Float[Array, ""]
     poisson_capacity: int = eqx.field(static=True)
     max_tracks: int = eqx.field(static=True)
-    max_hypotheses: int = eqx.field(static=True)
+    hypotheses: AbstractGlobalHypotheses
     labelled: ClassVar[bool] = True
+
+    @property
+    def max_hypotheses(self) -> int:
+        """``H``, the global hypotheses the state holds (the ``hypotheses`` strategy's; 1 for the PMB)."""
+        return self.hypotheses.max_hypotheses
 
     def init(self) -> PMBMState:
         """The prior: the initial Poisson intensity, no tracks, one global hypothesis."""
@@ -400,7 +430,11 @@ class AbstractMultiBernoulliFilter(AbstractGaussianMixtureFilter):
         return _predict(self, state)
 
     def update(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
-        raise NotImplementedError
+        """The update of the predicted density on one padded scan, by the ``hypotheses`` strategy
+        (:class:`~jaxtrack.multitarget.RankedAssignment`: the PMBM's ``H`` best global hypotheses;
+        :class:`~jaxtrack.multitarget.MarginalProjection`: the PMB's projection to one
+        multi-Bernoulli through association marginals)."""
+        return self.hypotheses.update(self, state, measurements, valid)
 
     def step(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
         """One scan: :meth:`predict` (not on scan 0, which updates the prior), :meth:`update`.

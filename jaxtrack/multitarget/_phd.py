@@ -57,6 +57,7 @@ from ..association._gating import measurement_likelihoods
 from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
 from ._base import AbstractMultiTargetFilter, Estimates, check_scans, scan_method, scan_ok, warn_capacity, warn_not_ok
+from ._clutter import resolve_clutter
 from ._mixture import (
     AbstractMixtureReduction,
     GaussianMixture,
@@ -294,7 +295,9 @@ class GMPHD(AbstractGaussianMixtureFilter):
     - ``prob_survival``: ``P_S`` in ``(0, 1]``; ``prob_detect``: ``P_D`` in ``(0, 1]``.
     - ``clutter_density``: ``κ``, clutter points per unit measurement-space volume per scan
       (e.g. per m² for positions), ``> 0`` and finite (0 would make a measurement that no
-      component reaches 0/0: use a small positive value for an almost clutter-free sensor).
+      component reaches 0/0: use a small positive value for an almost clutter-free sensor); Stone
+      Soup's name ``clutter_spatial_density`` is accepted too, or ``clutter_rate`` (points per scan)
+      with ``clutter_volume`` (:mod:`jaxtrack.multitarget._clutter`).
     - ``birth``: the birth intensity ``γ_k``, a :class:`~jaxtrack.multitarget.GaussianMixture`
       (weights: expected births per scan).
     - ``capacity``: ``J_max``, the number of mixture slots after reduction (static).
@@ -362,7 +365,7 @@ class GMPHD(AbstractGaussianMixtureFilter):
         *,
         prob_survival: ArrayLike,
         prob_detect: ArrayLike,
-        clutter_density: ArrayLike,
+        clutter_density: ArrayLike | None = None,
         birth: GaussianMixture | None = None,
         capacity: int,
         reduction: AbstractMixtureReduction | None = None,
@@ -370,8 +373,14 @@ class GMPHD(AbstractGaussianMixtureFilter):
         gate: ArrayLike = math.inf,
         max_estimates: int | None = None,
         initial: GaussianMixture | None = None,
+        clutter_spatial_density: ArrayLike | None = None,
+        clutter_rate: ArrayLike | None = None,
+        clutter_volume: ArrayLike | None = None,
         **deprecated,
     ):
+        clutter_density, _, _ = resolve_clutter(
+            "GMPHD", clutter_density=clutter_density, clutter_spatial_density=clutter_spatial_density,
+            clutter_rate=clutter_rate, clutter_volume=clutter_volume)
         n = model.state_dim if isinstance(model, AbstractStateSpaceModel) else 0
         birth = legacy_mixture("birth", deprecated, birth, n, required=True)
         initial = legacy_mixture("initial", deprecated, initial, n, required=False)

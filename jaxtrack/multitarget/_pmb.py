@@ -40,7 +40,9 @@ import jax.numpy as jnp
 from .._validation import InputError, is_concrete
 from ..association._jpda import JPDA
 from ..association._types import AbstractAssociator
+from ._clutter import resolve_clutter
 from ._multibernoulli import (
+    AbstractGlobalHypotheses,
     AbstractMultiBernoulliFilter,
     PMBMState,
     PMBMStepInfo,
@@ -78,22 +80,48 @@ class PMB(AbstractMultiBernoulliFilter):
         ```
     """
 
-    associator: AbstractAssociator
-
-    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density, birth=None,
+    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density=None, birth=None,
                  max_tracks: int, poisson_capacity: int = 16, initial=None, existence_threshold=1e-5,
                  poisson_reduction=None, estimation_threshold=0.4, gate=math.inf,
-                 associator: AbstractAssociator | None = None, **deprecated):
+                 associator: AbstractAssociator | None = None, clutter_spatial_density=None, clutter_rate=None,
+                 clutter_volume=None, **deprecated):
         fields = _mb_fields(
-            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, clutter_density=clutter_density,
+            filter, model, prob_survival=prob_survival, prob_detect=prob_detect,
+            clutter_density=resolve_clutter("PMB", clutter_density=clutter_density,
+                                            clutter_spatial_density=clutter_spatial_density,
+                                            clutter_rate=clutter_rate, clutter_volume=clutter_volume)[0],
             birth=birth, initial=initial, poisson_capacity=poisson_capacity, max_tracks=max_tracks,
             poisson_reduction=poisson_reduction, existence_threshold=existence_threshold,
             estimation_threshold=estimation_threshold, gate=gate, deprecated=deprecated, cls="PMB",
         )
         for name, value in fields.items():
             setattr(self, name, value)
-        if is_concrete(self.clutter_density) and not float(self.clutter_density) > 0.0:
-            raise InputError("`clutter_density` must be > 0 for the PMB (the marginals are normalised by e + κ).")
+        self.hypotheses = MarginalProjection(associator)
+        self.hypotheses.check(self)
+
+    @property
+    def associator(self) -> AbstractAssociator:
+        """The association method of the projection (``hypotheses.associator``)."""
+        return self.hypotheses.associator
+
+
+class MarginalProjection(AbstractGlobalHypotheses):
+    """The PMB's update (W15 Sec. IV-B): the PMBM posterior projected to one multi-Bernoulli
+    through the association marginals of any :class:`~jaxtrack.association.AbstractAssociator`
+    (module docstring). ``PMBM(..., hypotheses=MarginalProjection(associator))`` is the
+    :class:`PMB`.
+
+    **Arguments:** ``associator``: the association method (default
+    :class:`~jaxtrack.association.JPDA`, exact within its cluster capacity; ``LoopyBP`` for W15's
+    belief propagation). When it cannot answer (``ok`` False) the scan's ``association_ok`` is
+    False, counted as a capacity event. Needs ``clutter_density > 0`` (the marginals are
+    normalised by ``e_j + κ``).
+    """
+
+    associator: AbstractAssociator
+    max_hypotheses: int = eqx.field(static=True)
+
+    def __init__(self, associator: AbstractAssociator | None = None):
         associator = JPDA() if associator is None else associator
         if not isinstance(associator, AbstractAssociator):
             raise InputError(f"`associator` must be a jaxtrack association method (JPDA, LoopyBP, ...); got "
@@ -101,10 +129,13 @@ class PMB(AbstractMultiBernoulliFilter):
         self.associator = associator
         self.max_hypotheses = 1
 
-    def update(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
+    def check(self, f) -> None:
+        if is_concrete(f.clutter_density) and not float(f.clutter_density) > 0.0:
+            raise InputError("`clutter_density` must be > 0 for the PMB (the marginals are normalised by e + κ).")
+
+    def update(self, f, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
         """The PMBM update projected to one multi-Bernoulli through the association marginals
         (module docstring; W15 Sec. IV-B)."""
-        f = self
         dtype = state.existence.dtype
         valid = jnp.asarray(valid, bool)
         # Padding may hold NaN: zeros instead, so that no NaN reaches a product with a zero weight.
@@ -117,7 +148,7 @@ class PMB(AbstractMultiBernoulliFilter):
         present = (state.hypotheses[0] >= 0) & state.track_active
         L = jnp.concatenate([log_miss[:, :1], log_det[:, 0, :] - log_new[None, :]], axis=1)
         L = jnp.where(present[:, None], L, -jnp.inf)
-        assoc = f.associator(L, present)
+        assoc = self.associator(L, present)
         beta = jnp.where(present[:, None], assoc.association_probabilities, 0.0)
         b0, bj = beta[:, 0], beta[:, 1:]
 

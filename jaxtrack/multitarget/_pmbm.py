@@ -61,7 +61,9 @@ from jaxtyping import Array, Float
 
 from .._validation import InputError, is_concrete
 from ..association._murty import k_best_assignments
+from ._clutter import resolve_clutter
 from ._multibernoulli import (
+    AbstractGlobalHypotheses,
     AbstractMultiBernoulliFilter,
     PMBMState,
     PMBMStepInfo,
@@ -132,6 +134,10 @@ class PMBM(AbstractMultiBernoulliFilter):
       ``r`` above it (default 0.4, the reference's estimator 1).
     - ``gate``: Mahalanobis distance beyond which a measurement does not update a track or a
       Poisson component (default ``inf``; the reference uses ``sqrt(20)``).
+    - ``hypotheses``: the global-hypothesis strategy (the "k-best step"); default
+      :class:`RankedAssignment` built from ``max_hypotheses``, ``assignment_rows``,
+      ``assignment_tracks`` and ``hypothesis_threshold``. ``hypotheses=MarginalProjection(JPDA())``
+      makes this filter the track-oriented PMB (:class:`~jaxtrack.multitarget.PMB` is exactly that).
 
     ``P_S``, ``P_D``, ``κ``, the intensities and thresholds are array leaves (no recompilation
     when they change). The update's discrete choices (which hypotheses are kept) make the filter
@@ -151,31 +157,85 @@ class PMBM(AbstractMultiBernoulliFilter):
         ```
     """
 
-    hypothesis_threshold: Float[Array, ""]
-    assignment_rows: int = eqx.field(static=True)
-    assignment_tracks: int = eqx.field(static=True)
-
-    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density, birth=None,
-                 max_tracks: int, max_hypotheses: int, poisson_capacity: int = 16,
+    def __init__(self, filter, model, *, prob_survival, prob_detect, clutter_density=None, birth=None,
+                 max_tracks: int, max_hypotheses: int | None = None, poisson_capacity: int = 16,
                  assignment_rows: int = 16, assignment_tracks: int = 24, initial=None, hypothesis_threshold=0.0,
                  existence_threshold=1e-5, poisson_reduction=None, estimation_threshold=0.4, gate=math.inf,
-                 **deprecated):
+                 clutter_spatial_density=None, clutter_rate=None, clutter_volume=None,
+                 hypotheses: AbstractGlobalHypotheses | None = None, **deprecated):
         fields = _mb_fields(
-            filter, model, prob_survival=prob_survival, prob_detect=prob_detect, clutter_density=clutter_density,
+            filter, model, prob_survival=prob_survival, prob_detect=prob_detect,
+            clutter_density=resolve_clutter("PMBM", clutter_density=clutter_density,
+                                            clutter_spatial_density=clutter_spatial_density,
+                                            clutter_rate=clutter_rate, clutter_volume=clutter_volume)[0],
             birth=birth, initial=initial, poisson_capacity=poisson_capacity, max_tracks=max_tracks,
             poisson_reduction=poisson_reduction, existence_threshold=existence_threshold,
             estimation_threshold=estimation_threshold, gate=gate, deprecated=deprecated, cls="PMBM",
         )
         for name, value in fields.items():
             setattr(self, name, value)
-        if is_concrete(self.prob_detect) and float(self.prob_detect) >= 1.0:
-            raise InputError("`prob_detect` must be < 1 for the PMBM (a track with r = 1 could not be missed).")
+        if hypotheses is None:
+            if max_hypotheses is None:
+                raise InputError("PMBM needs `max_hypotheses` (H, the global hypotheses kept), or a `hypotheses` "
+                                 "strategy.")
+            hypotheses = RankedAssignment(max_hypotheses, assignment_rows=assignment_rows,
+                                          assignment_tracks=assignment_tracks,
+                                          hypothesis_threshold=hypothesis_threshold)
+        elif not isinstance(hypotheses, AbstractGlobalHypotheses):
+            raise InputError(f"`hypotheses` must be RankedAssignment(...) or MarginalProjection(...); got "
+                             f"{type(hypotheses).__name__}.")
+        hypotheses.check(self)
+        self.hypotheses = hypotheses
+
+    # The ranked assignment's settings, read through the filter (as before they were a strategy).
+    @property
+    def assignment_rows(self) -> int:
+        return self.hypotheses.assignment_rows
+
+    @property
+    def assignment_tracks(self) -> int:
+        return self.hypotheses.assignment_tracks
+
+    @property
+    def hypothesis_threshold(self) -> Float[Array, ""]:
+        return self.hypotheses.hypothesis_threshold
+
+
+class RankedAssignment(AbstractGlobalHypotheses):
+    r"""The PMBM's global hypotheses: the ``H`` best posterior hypotheses over all prior ones at
+    once, by Murty's ranked assignment (G18 Sec. V; :func:`~jaxtrack.association.k_best_assignments`),
+    then pruned below ``hypothesis_threshold``.
+
+    **Arguments:**
+
+    - ``max_hypotheses``: ``H`` (the reference's ``Nhyp_max``; static).
+    - ``assignment_rows``: ``A``, the most measurements per scan that fall in some track's gate,
+      and ``assignment_tracks``: ``C``, the most tracks they reach (static; defaults 16, 24):
+      beyond them a measurement can only start a new track, a track can only be missed, counted
+      in ``assignment_overflow`` (a capacity event).
+    - ``hypothesis_threshold``: global hypotheses of normalised weight below it are pruned
+      (default 0: keep the ``H`` best).
+
+    Needs ``P_D < 1`` (the assignment works on likelihood ratios to the miss).
+    """
+
+    max_hypotheses: int = eqx.field(static=True)
+    assignment_rows: int = eqx.field(static=True)
+    assignment_tracks: int = eqx.field(static=True)
+    hypothesis_threshold: Float[Array, ""]
+
+    def __init__(self, max_hypotheses: int, *, assignment_rows: int = 16, assignment_tracks: int = 24,
+                 hypothesis_threshold=0.0):
         self.max_hypotheses = _positive_int("max_hypotheses", max_hypotheses)
         self.assignment_rows = _positive_int("assignment_rows", assignment_rows)
         self.assignment_tracks = _positive_int("assignment_tracks", assignment_tracks)
         self.hypothesis_threshold = _scalar("hypothesis_threshold", hypothesis_threshold, low=0.0, high=1.0)
 
-    def update(self, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
+    def check(self, f) -> None:
+        if is_concrete(f.prob_detect) and float(f.prob_detect) >= 1.0:
+            raise InputError("`prob_detect` must be < 1 for the PMBM (a track with r = 1 could not be missed).")
+
+    def update(self, f, state: PMBMState, measurements, valid) -> tuple[PMBMState, PMBMStepInfo]:
         r"""Update (G18 Theorem 2) on one padded scan, with the ``H`` best posterior global
         hypotheses and the pruning of the module docstring.
 
@@ -186,13 +246,12 @@ class PMBM(AbstractMultiBernoulliFilter):
         offset ``−log w_h − Σ_t log ℓ_miss(t, l_t)``: a complete assignment's total is minus the
         log weight of the posterior hypothesis it makes (G18 eq. (25)).
         """
-        f = self
         dtype = state.existence.dtype
         valid = jnp.asarray(valid, bool)
         # Padding may hold NaN: zeros instead, so that no NaN reaches a product with a zero weight.
         z = jnp.where(valid[:, None], jnp.asarray(measurements, dtype), 0.0)
         k = state.step
-        N, H = f.max_tracks, f.max_hypotheses
+        N, H = f.max_tracks, self.max_hypotheses
         M = z.shape[0]
         new_r, new_mean, new_cov, log_new, ppp_w = _new_tracks(f, state, z, valid, k)
         log_miss, log_det, r_miss = _track_weights(f, state, z, valid, k)
@@ -210,7 +269,7 @@ class PMBM(AbstractMultiBernoulliFilter):
         # than one way; every other one starts its own track in every hypothesis. The ranked
         # assignment runs on those rows and the tracks they can take, compacted into A rows and C
         # track columns (then A new-track columns): Murty's cost is ~k·A³(A + C), not k·M³(M + N).
-        A, C = f.assignment_rows, f.assignment_tracks
+        A, C = self.assignment_rows, self.assignment_tracks
         in_gate = jnp.any(allowed, axis=(0, 1)) & valid  # (M,)
         rows = jnp.nonzero(in_gate, size=A, fill_value=M)[0]
         row_real = rows < M
@@ -240,7 +299,7 @@ class PMBM(AbstractMultiBernoulliFilter):
         top_safe = jnp.where(jnp.isfinite(top), top, 0.0)
         log_total = top_safe + jnp.log(jnp.sum(jnp.where(ok, jnp.exp(raw - top_safe), 0.0)))
         log_w = jnp.where(ok, raw - log_total, -jnp.inf)
-        hyp_active = ok & (log_w >= jnp.log(f.hypothesis_threshold.astype(dtype)))
+        hyp_active = ok & (log_w >= jnp.log(self.hypothesis_threshold.astype(dtype)))
         ppp_mass = jnp.sum(jnp.where(state.poisson_active, state.poisson_weights, 0.0))
         log_likelihood = log_total - f.prob_detect * ppp_mass
 

@@ -258,6 +258,18 @@ class Scenario(eqx.Module):
         return self.initial_states.shape[0]
 
     @property
+    def clutter_volume(self) -> Float[Array, ""]:
+        """``V``: the clutter region's measure in measurement space (the product of its widths,
+        e.g. m² or m·rad)."""
+        widths = self.clutter_region[:, 1] - self.clutter_region[:, 0]
+        return jnp.prod(widths)
+
+    @property
+    def clutter_spatial_density(self) -> Float[Array, ""]:
+        """Stone Soup's name of :attr:`clutter_density` (``λ / V``)."""
+        return self.clutter_density
+
+    @property
     def clutter_density(self) -> Float[Array, ""]:
         """``λ / V``: the clutter's spatial density, per unit volume of measurement space (the
         product of the region's widths, e.g. m·rad)."""

@@ -47,6 +47,7 @@ from ..association._pda_update import pda_update
 from ..association._types import AbstractAssociator, Association
 from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
+from ._clutter import resolve_clutter
 from ._base import AbstractMultiTargetFilter, Estimates, check_scans, scan_method, scan_ok, warn_capacity, warn_not_ok
 
 EMPTY = 0
@@ -326,7 +327,9 @@ class Tracker(AbstractMultiTargetFilter):
     - ``association``: an :class:`~jaxtrack.association.AbstractAssociator`.
     - ``initiator``: a :class:`OnePointInitiator`; ``management``: a :class:`TrackManagement`.
     - ``prob_detect``: ``P_D``; ``clutter_density``: ``λ``, clutter points per unit
-      measurement-space volume per scan; ``prob_gate``: ``P_G`` of the χ² gate (1: no gate).
+      measurement-space volume per scan (Stone Soup's ``clutter_spatial_density``, accepted under
+      that name too; or give ``clutter_rate``, points per scan, with ``clutter_volume``:
+      :mod:`jaxtrack.multitarget._clutter`); ``prob_gate``: ``P_G`` of the χ² gate (1: no gate).
       ``P_D`` and ``λ`` are array leaves (differentiable).
     - ``capacity``: the number of track slots ``N`` (static).
     - ``existence``: None, or :class:`IntegratedExistence` for JIPDA.
@@ -361,12 +364,14 @@ class Tracker(AbstractMultiTargetFilter):
         initiator: OnePointInitiator,
         *,
         prob_detect: ArrayLike,
-        clutter_density: ArrayLike,
+        clutter_density: ArrayLike | None = None,
         prob_gate: float = 1.0,
         capacity: int,
         management: TrackManagement | None = None,
         existence: IntegratedExistence | None = None,
         clutter_volume: ArrayLike | None = None,
+        clutter_rate: ArrayLike | None = None,
+        clutter_spatial_density: ArrayLike | None = None,
     ):
         if not isinstance(filter, AbstractFilter):
             raise InputError(f"`filter` must be a jaxtrack filter; got {type(filter).__name__}.")
@@ -390,6 +395,9 @@ class Tracker(AbstractMultiTargetFilter):
         self.initiator = initiator
         self.management = TrackManagement() if management is None else management
         self.prob_detect = jnp.asarray(prob_detect, float)
+        clutter_density, _, _ = resolve_clutter(
+            "Tracker", clutter_density=clutter_density, clutter_spatial_density=clutter_spatial_density,
+            clutter_rate=clutter_rate, clutter_volume=clutter_volume)
         self.clutter_density = jnp.asarray(clutter_density, float)
         if is_concrete(self.prob_detect) and not 0.0 < float(self.prob_detect) <= 1.0:
             raise InputError(f"`prob_detect` must lie in (0, 1]; got {float(self.prob_detect)}.")

@@ -83,7 +83,7 @@ def methods(scen: Scenario | None = None, settings: Williams15Settings | None = 
                                   filter=kf)
     return {
         "phd": GMPHD(kf, scen.model, clutter_density=s.clutter_density, capacity=PHD_CAPACITY, **common),
-        "cphd": GMCPHD(kf, scen.model, clutter_rate=s.clutter_rate, clutter_spatial_density=s.clutter_density / s.clutter_rate,
+        "cphd": GMCPHD(kf, scen.model, clutter_rate=s.clutter_rate, clutter_density=s.clutter_density,
                        capacity=PHD_CAPACITY, max_cardinality=MAX_CARDINALITY, **common),
         "pmb": PMB(kf, scen.model, associator=JPDA(max_cluster_tracks=JPDA_CLUSTER_TRACKS, max_large_clusters=3),
                    **common, **mb),
