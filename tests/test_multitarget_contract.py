@@ -191,3 +191,19 @@ def _quiet_but_deprecation(fn, *args, **kwargs):
         warnings.simplefilter("ignore")
         warnings.simplefilter("always", DeprecationWarning)
         return fn(*args, **kwargs)
+
+
+def test_the_pmb_is_the_pmbm_with_a_marginal_projection(case, reference):
+    """``PMBM(..., hypotheses=MarginalProjection(associator))`` is the PMB, bit for bit (the PMB and
+    PMBM share every step but the global-hypothesis strategy)."""
+    from jaxtrack.multitarget import PMBM, MarginalProjection
+
+    scen, methods, z, v = case
+    pmb = methods["pmb"]
+    as_pmbm = PMBM(pmb.filter, pmb.model, prob_survival=pmb.prob_survival, prob_detect=pmb.prob_detect,
+                   clutter_density=pmb.clutter_density, birth=pmb.birth, initial=pmb.initial, max_tracks=pmb.max_tracks,
+                   gate=pmb.gate, hypotheses=MarginalProjection(pmb.associator))
+    assert as_pmbm.max_hypotheses == 1
+    new = _fields(_quiet(run_pmbm, as_pmbm, z, v, warn=False))
+    for key in (k for k in reference if k.startswith("pmb/run/")):
+        np.testing.assert_array_equal(new[key.split("/", 2)[2]], reference[key], err_msg=key)
