@@ -171,8 +171,12 @@ def sparse_marginals(L: Float[Array, "T Mp1"], bits: int):
     # Per cluster row and bit: the "takes no shared measurement" weight (1 for an unused bit),
     # and the end weights Π_{b ∉ S} U_b of every state. (One track per (row, bit): the sums
     # add one term to zeros.)
-    slot = (label[None, :] == jnp.arange(rows)[:, None])[:, :, None] & bit_of[None, :, :]
-    U = jnp.where(jnp.any(slot, axis=1), jnp.sum(jnp.where(slot, u[None, :, None], 0.0), axis=1), 1.0)
+    if one_cluster:  # track t is bit t of the one row
+        slot = np.eye(T, dtype=bool)[None]
+        U = u[None, :]
+    else:
+        slot = (label[None, :] == jnp.arange(rows)[:, None])[:, :, None] & bit_of[None, :, :]
+        U = jnp.where(jnp.any(slot, axis=1), jnp.sum(jnp.where(slot, u[None, :, None], 0.0), axis=1), 1.0)
     member_np, without_np, with_np = subset_tables(bits)
     member, without, with_ = jnp.asarray(member_np), jnp.asarray(without_np), jnp.asarray(with_np)
     tails = jnp.prod(jnp.where(member[None, :, :], 1.0, U[:, None, :]), axis=2)  # (rows, 2^bits)
@@ -182,9 +186,17 @@ def sparse_marginals(L: Float[Array, "T Mp1"], bits: int):
     def item(j):
         """Column ``j``'s cluster row (a mask) and its weight per cluster bit (0 if ``j = M``)."""
         jj = jnp.minimum(j, M - 1)
-        w = jax.lax.dynamic_index_in_dim(W, jj + 1, 1, keepdims=False)  # (T,)
-        p = jnp.sum(jnp.where(bit_of & (j < M), w[:, None], 0.0), axis=0)
+        w = jnp.where(j < M, jax.lax.dynamic_index_in_dim(W, jj + 1, 1, keepdims=False), 0.0)  # (T,)
+        if one_cluster:
+            return None, w
+        p = jnp.sum(jnp.where(bit_of, w[:, None], 0.0), axis=0)
         return (row_ids == col_row[jj])[:, None], p
+
+    def get_row(x, here):
+        return x[0] if one_cluster else jnp.sum(jnp.where(here, x, 0.0), axis=0)
+
+    def set_row(x, here, row):
+        return row[None, :] if one_cluster else jnp.where(here, row[None, :], x)
 
     # Forward over the shared measurements in index order (each found by a search; past the
     # last one, j = M and the step changes nothing).
@@ -192,11 +204,11 @@ def sparse_marginals(L: Float[Array, "T Mp1"], bits: int):
         j, alpha, history, visited = carry
         j = jnp.min(jnp.where(shared & (cols > j), cols, M))
         here, p = item(j)
-        a = jnp.sum(jnp.where(here, alpha, 0.0), axis=0)
+        a = get_row(alpha, here)
         history = jax.lax.dynamic_update_index_in_dim(history, a, k, 0)
         visited = jax.lax.dynamic_update_index_in_dim(visited, j, k, 0)
         a = a + _small_sum(jnp.where(member, a[without] * p[None, :], 0.0), axis=1)
-        return j, jnp.where(here, a[None, :], alpha), history, visited
+        return j, set_row(alpha, here, a), history, visited
 
     n_s = jnp.sum(shared)
     n = batch_max(jnp.minimum(n_s, H))
@@ -210,27 +222,28 @@ def sparse_marginals(L: Float[Array, "T Mp1"], bits: int):
     z_safe = jnp.where(z > 0, z, 1.0)
     unused = jnp.sum(jnp.where(member[None, :, :], 0.0, end[:, :, None]), axis=1) / z_safe[:, None]
     q = jnp.where(in_dp, unused[label, local], 1.0)
-    used = jnp.any(slot, axis=(1, 2))  # a row that is some cluster's
+    used = np.ones((1,), bool) if one_cluster else jnp.any(slot, axis=(1, 2))  # a row that is a cluster's
 
     def backward(k, carry):
         gamma, taken = carry
         k = n - 1 - k
         j = visited[k]
         here, p = item(j)
-        g = jnp.sum(jnp.where(here, gamma, 0.0), axis=0)
+        g = get_row(gamma, here)
         a = history[k]
         via = jnp.where(member, 0.0, p[None, :] * g[with_])  # (2^bits, bits)
         # (Selects rather than products with 0/1 masks, which XLA turns into dots.)
         pair = jnp.sum(jnp.where(member, 0.0, a[:, None] * via), axis=0)
         zk = jnp.sum(jnp.where(a * g >= 0, a * g, jnp.nan)) + _small_sum(pair, axis=0)  # Z_c again
-        taken = taken.at[j].set(pair / jnp.where(zk > 0, zk, 1.0), mode="drop")
-        return jnp.where(here, (g + _small_sum(via, axis=1))[None, :], gamma), taken
+        taken = jax.lax.dynamic_update_index_in_dim(taken, pair / jnp.where(zk > 0, zk, 1.0), j, 0)
+        return set_row(gamma, here, g + _small_sum(via, axis=1)), taken
 
-    _, taken = jax.lax.fori_loop(0, n, backward, (tails, jnp.zeros((M, bits), dtype)))
+    # (Row M takes the steps past the last shared measurement.)
+    _, taken = jax.lax.fori_loop(0, n, backward, (tails, jnp.zeros((M + 1, bits), dtype)))
 
     # Back to the tracks' rows: shared columns from the DP, the missed and private ones by
     # splitting each track's "no shared measurement" probability `q` in proportion.
-    beta_shared = jnp.where(gs, taken[:, local].T, 0.0)  # (T, M)
+    beta_shared = jnp.where(gs, taken[:M, local].T, 0.0)  # (T, M)
     u_safe = jnp.where(u > 0, u, 1.0)
     beta = own * (q / u_safe)[:, None] + jnp.concatenate([jnp.zeros((T, 1), dtype), beta_shared], axis=1)
     log_Z = jnp.sum(jnp.where(used, jnp.log(z_safe), 0.0)) + jnp.sum(jnp.where(in_dp, 0.0, jnp.log(u_safe))) + jnp.sum(m)
