@@ -374,8 +374,7 @@ def _sparse(bits):
     return jax.jit(jax.vmap(lambda L: sparse_marginals(L, bits)))
 
 
-@pytest.mark.parametrize("T, M, bits", [(8, 16, 3), (8, 16, 8), (4, 6, 4)],
-                         ids=["clusters", "one-row", "small"])
+@pytest.mark.parametrize("T, M, bits", [(8, 16, 3), (8, 16, 8)], ids=["clusters", "one-row"])
 def test_sparse_path_equals_the_subset_dp(T, M, bits):
     """The sparse path equals the log-space subset DP to 1e-12 wherever it answers, with padded
     and garbage tracks, padded (all −inf) columns and gated-out rows; it declines (``fallback``)
