@@ -345,6 +345,130 @@ def test_jpda_equals_pyehm_nine_tracks():
 
 
 # ---------------------------------------------------------------------------------------------
+# The sparse path (``_jpda_sparse``): private measurements folded in, a subset DP per cluster.
+
+
+def _cluster_sizes(L):
+    """The largest cluster (tracks linked by a measurement both gate) of ``L``, by union-find."""
+    T = L.shape[0]
+    parent = list(range(T))
+
+    def find(a):
+        while parent[a] != a:
+            a = parent[a]
+        return a
+
+    gated = L[:, 1:] > NINF
+    for j in np.nonzero(gated.sum(axis=0) >= 2)[0]:
+        rows = np.nonzero(gated[:, j])[0]
+        for r in rows[1:]:
+            parent[find(r)] = find(rows[0])
+    roots = [find(t) for t in range(T) if gated[t, gated.sum(axis=0) >= 2].any()]
+    return max(np.bincount(roots)) if roots else 0
+
+
+@functools.cache
+def _sparse(bits):
+    from jaxtrack.association._jpda_sparse import sparse_marginals
+
+    return jax.jit(jax.vmap(lambda L: sparse_marginals(L, bits)))
+
+
+@pytest.mark.parametrize("T, M, bits", [(8, 16, 3), (8, 16, 8)], ids=["clusters", "one-row"])
+def test_sparse_path_equals_the_subset_dp(T, M, bits):
+    """The sparse path equals the log-space subset DP to 1e-12 wherever it answers, with padded
+    and garbage tracks, padded (all −inf) columns and gated-out rows; it declines (``fallback``)
+    exactly when a cluster has more than ``bits`` tracks, never truncating one."""
+    from jaxtrack.association._jpda import _prepare, _subset_exact
+
+    rng = np.random.default_rng(40 + T + bits)
+    L, valid = _random_problems(rng, BATCH, T, M, gate_prob=2.5 / M)
+    L = np.stack([np.asarray(_prepare(jnp.asarray(x), jnp.asarray(v))[0]) for x, v in zip(L, valid)])
+    beta, log_Z, fallback = (np.asarray(a) for a in _sparse(bits)(jnp.asarray(L)))
+    beta_dp, log_Z_dp = (np.asarray(a) for a in jax.jit(jax.vmap(_subset_exact))(jnp.asarray(L)))
+    sizes = np.array([_cluster_sizes(x) for x in L])
+    np.testing.assert_array_equal(fallback, sizes > bits)
+    answered = ~fallback
+    assert answered.mean() > 0.5 and (sizes[answered] >= 2).any()  # real clusters, mostly answered
+    np.testing.assert_allclose(beta[answered], beta_dp[answered], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(log_Z[answered], log_Z_dp[answered], rtol=0, atol=1e-12)
+    # A measurement outside every gate is clutter; a padded track is certainly missed.
+    assert (beta[:, :, 1:][np.broadcast_to(~np.isfinite(L[:, :, 1:]), beta[:, :, 1:].shape)] == 0).all()
+
+
+def test_sparse_path_declines_what_it_cannot_answer():
+    """``fallback`` for a cluster over ``bits``, more shared measurements than ``HISTORY``, a
+    normaliser out of linear range (missed weights of 0, detections of weight e^-450), NaN and
+    +inf; JPDA() then answers as the log-space DP does, and the other scans of the vmapped
+    batch keep their (equal) sparse answers."""
+    from jaxtrack.association._jpda import _subset_exact
+    from jaxtrack.association._jpda_sparse import HISTORY
+
+    M = HISTORY + 8
+    cases = np.full((7, 5, 1 + M), NINF)
+    cases[:, :, 0] = -1.0
+    cases[0, :, 1] = 0.5  # 5 tracks sharing measurement 1: a cluster of 5 > bits = 4
+    cases[1, :2, 1:] = 0.1  # 2 tracks sharing all M > HISTORY measurements
+    cases[2, :2, 0], cases[2, :2, 1:3] = NINF, -450.0  # must-detect tracks, events of e^-900
+    cases[3, 0, 1], cases[3, 1, 1] = np.nan, 1.0
+    cases[4, 0, 1], cases[4, 1, 1] = np.inf, 1.0
+    for i in (5, 6):  # ordinary sparse scans
+        cases[i, 0, 1:3], cases[i, 1, 2:4], cases[i, 3, 5] = [1.0, 0.0], [0.5, -1.0], 2.0
+    cases[6, 2, 3] = 0.3
+    _, _, fallback = _sparse(4)(jnp.asarray(cases))
+    assert np.asarray(fallback).tolist() == [True] * 5 + [False] * 2
+    got = _numpy(jax.jit(jax.vmap(JPDA()))(jnp.asarray(cases)))
+    beta_dp, log_Z_dp = (np.asarray(a) for a in jax.jit(jax.vmap(_subset_exact))(jnp.asarray(cases)))
+    assert got.ok[[0, 1, 2, 5, 6]].all()
+    # Whatever the DP makes of NaN and +inf (another layer's flags), JPDA() gives the same.
+    np.testing.assert_allclose(got.association_probabilities, beta_dp, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got.log_normalizer, log_Z_dp, rtol=0, atol=1e-12)
+    assert np.isclose(got.log_normalizer[2], -900.0 + np.log(2.0) - 3.0, rtol=0, atol=1e-12)  # 3 tracks missed
+
+
+def test_batch_helpers():
+    """``batch_any``/``batch_max``: the value itself, and under (nested) vmap the unbatched
+    reduction over the whole batch."""
+    from jaxtrack.association._jpda_sparse import batch_any, batch_max
+
+    x = jnp.asarray([[1, 5, 2], [0, 3, 4]])
+    assert int(batch_max(x[0, 1])) == 5 and bool(batch_any(x[1, 0] > 0)) is False
+    out = jax.vmap(jax.vmap(lambda v: jnp.stack([batch_max(v), batch_any(v > 4).astype(v.dtype), v])))(x)
+    np.testing.assert_array_equal(out[..., 0], 5)
+    np.testing.assert_array_equal(out[..., 1], 1)
+    np.testing.assert_array_equal(out[..., 2], x)
+
+
+def test_jpda_equals_pyehm_on_tracker_scans():
+    """Realistic sparse scans (8 tracks in a 60 x 60 region, detections with P_D 0.9 and
+    uniform clutter up to 40 measurements, χ² gates at P_G 0.99), solved by clusters: JPDA()
+    equals pyehm's EHM2 on every scan."""
+    from pyehm.core import EHM2
+
+    rng = np.random.default_rng(12)
+    T, M, side, p_d = 8, 40, 60.0, 0.9
+    scans = []
+    for _ in range(BATCH):
+        centres = rng.uniform(0.0, side, (T, 2))
+        S = np.diag(rng.uniform(2.0, 8.0, 2))
+        z = [c + rng.normal(0.0, np.sqrt(np.diag(S))) for c in centres if rng.random() < p_d]
+        z = np.array(z + list(rng.uniform(0.0, side, (M - len(z), 2))))[rng.permutation(M)]
+        d2 = (((z[None, :, :] - centres[:, None, :]) ** 2) / np.diag(S)).sum(axis=2)
+        L = np.where(d2 <= chi2.ppf(0.99, 2), np.log(p_d) - 0.5 * d2 - np.log(2 * np.pi * np.sqrt(np.prod(np.diag(S))))
+                     - np.log((M - T * p_d) / side**2), NINF)
+        scans.append(np.concatenate([np.full((T, 1), np.log1p(-p_d * 0.99)), L], axis=1))
+    scans = np.stack(scans)
+    got = _numpy(_jpda(jnp.asarray(scans), jnp.ones((BATCH, T), bool)))
+    assert got.ok.all()
+    shared = (np.isfinite(scans[:, :, 1:]).sum(axis=1) >= 2).sum(axis=1)
+    assert shared.max() >= 3 and max(_cluster_sizes(x) for x in scans) >= 3  # contested scans
+    ehm = EHM2()
+    for i in range(BATCH):
+        expect = ehm.run(np.isfinite(scans[i]).astype(np.int32), np.where(np.isfinite(scans[i]), np.exp(scans[i]), 0.0))
+        np.testing.assert_allclose(got.association_probabilities[i], expect, rtol=0, atol=1e-10)
+
+
+# ---------------------------------------------------------------------------------------------
 # PDA.
 
 

@@ -8,8 +8,10 @@ vmappable, and are differentiable with respect to ``L`` (entries at ``−inf`` g
 
 - :class:`PDA` (Bar-Shalom & Tse 1975): every track normalises its own row, ignoring the others.
 - :class:`JPDA` (Fortmann, Bar-Shalom & Scheffe 1983): the exact marginals of the joint
-  association, by a forward–backward dynamic program over subsets of the smaller side
-  (``O(max(T, M) · min(T, M) · 2^min(T, M))``, whatever the gates).
+  association, by a forward–backward dynamic program over subsets: of each cluster's tracks
+  over the measurements that two tracks or more gate (``_jpda_sparse``), or, where that path
+  does not answer, of the smaller side over everything (``O(max(T, M) · min(T, M) ·
+  2^min(T, M))``, whatever the gates).
 - :class:`LoopyBP` (Williams & Lau 2014): the belief-propagation approximation of the same
   marginals, a fixed number of iterations in ``lax.fori_loop``, ``O(num_iters · T · M)``; exact
   when the gating graph has no cycle.
@@ -17,6 +19,7 @@ vmappable, and are differentiable with respect to ``L`` (entries at ``−inf`` g
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import equinox as eqx
@@ -27,6 +30,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._validation import CapacityWarning, InputError, is_concrete, nan_where_traced
 from ._clusters import solve_by_cluster
+from ._jpda_sparse import batch_any, sparse_marginals, subset_tables
 from ._types import AbstractAssociator, Association
 
 # ---------------------------------------------------------------------------------------------
@@ -192,12 +196,9 @@ class PDA(AbstractAssociator):
 # Exact JPDA.
 
 
-def _subset_tables(K: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For the ``2^K`` subsets ``S`` of ``K`` bits: membership ``(2^K, K)``, ``S∖{b}``, ``S∪{b}``."""
-    states = np.arange(2**K, dtype=np.int64)[:, None]
-    bits = np.left_shift(1, np.arange(K, dtype=np.int64))[None, :]
-    member = (states & bits) != 0
-    return member, (states & ~bits).astype(np.int32), (states | bits).astype(np.int32)
+# The largest cluster (in tracks) that the sparse path solves (2^5 states); larger ones go
+# through the log-space DP.
+SPARSE_CLUSTER_TRACKS = 5
 
 
 def _subset_dp(null: Array, pair: Array, unused: Array):
@@ -228,7 +229,7 @@ def _subset_dp(null: Array, pair: Array, unused: Array):
     is not taken, and the log of the sum over all events.
     """
     N, K = pair.shape
-    member_np, without_np, with_np = _subset_tables(K)
+    member_np, without_np, with_np = subset_tables(K)
     member = jnp.asarray(member_np)
     without, with_ = jnp.asarray(without_np), jnp.asarray(with_np)
     dtype = pair.dtype
@@ -279,18 +280,20 @@ class JPDA(AbstractAssociator):
     with the clutter density ``λ`` in place of the gate-volume estimate; Stone Soup's ``JPDA``
     enumerates the same events with ``itertools.product``).
 
-    **How.** Enumerating events costs ``Π_t (1 + m_t)``; here a dynamic program over subsets of
-    the smaller side does it in ``O(max(T, M) · k · 2^k)`` with ``k = min(T, M)``, independent
-    of the gates and with static shapes. With ``T ≤ M`` the measurements are processed one by
-    one and the state is the set of tracks already used: measurement ``j`` is clutter (log 0) or
-    is taken by an unused track ``t`` (``L[t, j]``); tracks never used contribute their missed
-    weight ``L[t, 0]`` at the end. With ``T > M`` the roles swap: tracks are processed one by
-    one, each missed (``L[t, 0]``) or taking an unused measurement (``L[t, j]``), and the state
-    is the set of measurements used. A forward and a backward pass (``lax.scan``) give every
-    marginal in log space. This beats an enumeration with static shapes (there is no static
-    bound on the number of events), and unlike pyehm's EHM its shapes do not depend on the
-    gates, at the price of ignoring their sparsity: for many tracks with sparse gates use
-    :class:`LoopyBP` or split the problem into clusters first.
+    **How.** Enumerating events costs ``Π_t (1 + m_t)``; here dynamic programs over subsets do
+    it with static shapes. First the sparse path (:mod:`~jaxtrack.association._jpda_sparse`):
+    a measurement only one track gates is folded into that track's missed weight, one no track
+    gates drops out, and the remaining *shared* measurements are processed one by one (a loop
+    as long as their number) by a DP whose state is the set of tracks of the measurement's
+    cluster (tracks linked by shared measurements) already used, in linear space with each row
+    divided by its missed weight; ``O(shared · bits · 2^bits)`` with ``bits`` = 5, the largest
+    cluster it takes. Where it does not answer (a cluster of more than 5 tracks, more than 32
+    shared measurements, weights out of its range, NaN), the log-space DP over subsets of the
+    smaller side does, in ``O(max(T, M) · k · 2^k)`` with ``k = min(T, M)`` (with ``T ≤ M`` the
+    measurements are the items and the state is the set of tracks already used; with ``T > M``
+    the roles swap), forward and backward passes (``lax.scan``) in log space. Under ``vmap``
+    the second runs only if some scan of the batch needs it. Both are exact; derivatives are
+    those of the log-space DP (``custom_jvp``), the sparse path's loops having traced lengths.
 
     **Arguments:**
 
@@ -379,9 +382,11 @@ class JPDA(AbstractAssociator):
         return result
 
 
-def _jpda_dense(L: Array, valid: Array) -> tuple[Array, Array, Array]:
-    """Exact marginals of one (sub-)problem by the subset DP: ``(beta, log_Z, ok)``."""
-    # Padded rows are already inert ([0, -inf, ...]): _prepare, or solve_by_cluster's padding.
+def _subset_exact(L: Array) -> tuple[Array, Array]:
+    """Exact marginals of one (sub-)problem by the log-space subset DP: ``(beta, log_Z)``.
+
+    Over subsets of the smaller side, whatever the gates; ``beta`` is NaN where ``Z = 0``.
+    """
     T, M = L.shape[0], L.shape[1] - 1
     missed, ratios = L[:, 0], L[:, 1:]
     if T <= M:
@@ -392,7 +397,41 @@ def _jpda_dense(L: Array, valid: Array) -> tuple[Array, Array, Array]:
         # Items: tracks (unmatched = missed); bits: measurements (unused = clutter, log 1).
         log_missed, log_assoc, _, log_Z = _subset_dp(missed, ratios, jnp.zeros((M,), L.dtype))
     beta = jnp.exp(jnp.concatenate([log_missed[:, None], log_assoc], axis=1))
-    beta = jnp.where(jnp.isfinite(log_Z), beta, jnp.nan)
+    return jnp.where(jnp.isfinite(log_Z), beta, jnp.nan), log_Z
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _exact(L: Array, bits: int) -> tuple[Array, Array]:
+    """``(beta, log_Z)`` of :func:`_subset_exact`, computed by the sparse path where it can.
+
+    :func:`~jaxtrack.association._jpda_sparse.sparse_marginals` answers scans whose clusters
+    have at most ``bits`` tracks (and whose normalisers are in range); the others, and a
+    ``vmap`` batch in which any scan needs it, go through the log-space DP (``lax.cond`` on a
+    batch-wide predicate, so that the DP runs only when needed). Derivatives are those of the
+    log-space DP (the sparse path's loops have traced bounds).
+    """
+    T, M = L.shape[0], L.shape[1] - 1
+    if T == 0 or M == 0:
+        return _subset_exact(L)
+    beta, log_Z, fallback = sparse_marginals(L, bits)
+
+    def dense(_):
+        beta_dp, log_Z_dp = _subset_exact(L)
+        return jnp.where(fallback, beta_dp, beta), jnp.where(fallback, log_Z_dp, log_Z)
+
+    return jax.lax.cond(batch_any(fallback), dense, lambda _: (beta, log_Z), None)
+
+
+@_exact.defjvp
+def _exact_jvp(bits, primals, tangents):
+    del bits
+    return jax.jvp(_subset_exact, primals, tangents)
+
+
+def _jpda_dense(L: Array, valid: Array) -> tuple[Array, Array, Array]:
+    """Exact marginals of one (sub-)problem: ``(beta, log_Z, ok)`` (invalid rows zeroed)."""
+    # Padded rows are already inert ([0, -inf, ...]): _prepare, or solve_by_cluster's padding.
+    beta, log_Z = _exact(L, SPARSE_CLUSTER_TRACKS)
     beta = jnp.where(valid[:, None], beta, 0.0)
     return beta, log_Z, jnp.isfinite(log_Z)
 
