@@ -373,6 +373,37 @@ def test_fast_merge_equals_its_loop_form(reduction, capacity):
         np.testing.assert_allclose(w_drop, want[5], rtol=1e-13)
 
 
+@pytest.mark.parametrize("reduction", ["stonesoup", "vo-ma"])
+def test_batched_merge_runs_members_in_turn(reduction, monkeypatch):
+    """Under ``jax.vmap`` on CPU the fast merging runs the batch's members one after another, each
+    its own ``while_loop``: every member's values are its own unbatched call's, bit for bit, with
+    components left over (capacity 40). The side-by-side form (the vmapped ``while_loop``, what
+    other platforms run) agrees to rounding, and is the one traced when asked for (no ``scan``
+    over the members)."""
+    from jaxtrack.multitarget import _reduction
+
+    merge = _reduction._merge_stonesoup if reduction == "stonesoup" else _reduction._merge_vo_ma
+    U, free = jnp.asarray(4.0), (jnp.zeros(2), jnp.eye(2))
+    batch = [_merge_inputs(seed) for seed in range(3)]
+    stacked = tuple(jnp.asarray(np.stack(x)) for x in zip(*batch))
+
+    def batched():
+        return jax.vmap(lambda *a: merge(40, U, *free, *a))
+
+    assert "scan" in str(jax.make_jaxpr(batched())(*stacked))
+    in_turn = jax.jit(batched())(*stacked)
+    monkeypatch.setattr(_reduction, "_BATCHED", "side-by-side")
+    assert "scan" not in str(jax.make_jaxpr(batched())(*stacked))
+    side = jax.jit(batched())(*stacked)
+    single = jax.jit(lambda *a: merge(40, U, *free, *a))
+    for i, inputs in enumerate(batch):
+        want = single(*map(jnp.asarray, inputs))
+        assert int(want[4]) > 0  # components left over
+        for a, b, c in zip(in_turn, side, want):
+            assert np.array_equal(np.asarray(a[i]), np.asarray(c))
+            np.testing.assert_allclose(np.asarray(b[i]), np.asarray(c), rtol=1e-13, atol=1e-13)
+
+
 @pytest.mark.parametrize(
     "kwargs, name",
     [

@@ -16,6 +16,14 @@ through either. Measured: Stone Soup's merging at ``J_max = 128``, ``M = 27`` (t
 Williams (2015) scenario (``J_max = 100``, up to 40 measurements a scan, one run, whole filter
 step; ``benchmarks/pmbm.py``): GM-PHD 18.5 ms a scan with the fixed loops, 0.77 ms with the while
 loop, GM-CPHD 19.0 and 1.26 ms (the same estimates: equal to rounding, see ``tests/test_gm_phd.py``).
+
+Under ``jax.vmap`` (a Monte Carlo block: ``tracker_monte_carlo``, ``monte_carlo_map``) the while
+loops would run side by side, each step of every member until the slowest member is done; on CPU
+the batching rule runs the members in turn instead (:func:`_in_turn_on_cpu`), so a batched run
+costs what a single run costs and gives its values bit for bit. Measured
+(``benchmarks/phd_batch.py``, 16 runs, CPU time per run, batch over one run): the GM-PHD on
+``crossing_targets()`` 1.88x side by side, 1.07x in turn (Stone Soup's merging 1.36x, 1.07x), in
+the Williams scenario 1.86x, 1.07x.
 """
 
 from __future__ import annotations
@@ -136,11 +144,59 @@ def _merge_pair(w_b, m_b, P_b, w_c, m_c, P_c, d):
     return jnp.minimum(ws, 1.0), m_b * a + m_c * b, P_b * a + P_c * b + jnp.outer(d, d) * a * b
 
 
-_CHUNK = 128  # candidates per vectorised distance evaluation in the fast Stone Soup merge
+_CHUNK = 128  # candidates per vectorised distance evaluation in the fast mergings
+
+# How a vmapped batch runs the fast mergings: "platform" (members in turn on CPU, side by side
+# elsewhere), "in-turn" or "side-by-side" everywhere (``benchmarks/phd_batch.py`` compares them).
+_BATCHED = "platform"
+
+
+def _in_turn_on_cpu(fun, *args):
+    """``fun(*args)`` (arrays in, a tuple of arrays out), whose ``jax.vmap`` on CPU runs the
+    batch's members one after another (``lax.map``), each its own ``while_loop`` to its own trip
+    count, instead of side by side (elsewhere, where a batch's members run in parallel).
+
+    A ``while_loop`` vmapped side by side runs until its slowest member is done, every member
+    paying for every step (a finished one's steps are computed and discarded), and its
+    ``dynamic_slice``/``.at[]`` at per-member positions become gathers and scatters: on CPU a
+    batch of 16 crossing-targets GM-PHD runs cost 1.9x their single runs
+    (``benchmarks/phd_batch.py``). In turn it costs what the single runs cost, with their values
+    bit for bit. Elsewhere (``jax.lax.platform_dependent``'s ``default``, e.g. a GPU, which runs
+    a batch's members in parallel) the batch runs side by side, as ``jax.vmap`` makes it.
+    ``_BATCHED`` forces either form (benchmarks, tests). Differentiation is unaffected: the
+    mergings' ``custom_jvp`` differentiates the fixed loops, never this function."""
+    f = jax.custom_batching.custom_vmap(fun)
+
+    @f.def_vmap
+    def rule(axis_size, in_batched, *args):
+        del axis_size
+
+        def in_turn(*args):
+            def one(members):
+                it = iter(members)
+                return f(*(next(it) if b else a for a, b in zip(args, in_batched)))
+
+            return jax.lax.map(one, [a for a, b in zip(args, in_batched) if b])
+
+        def side_by_side(*args):
+            return jax.vmap(fun, in_axes=tuple(0 if b else None for b in in_batched))(*args)
+
+        if _BATCHED == "platform":
+            out = jax.lax.platform_dependent(*args, cpu=in_turn, default=side_by_side)
+        else:
+            out = (in_turn if _BATCHED == "in-turn" else side_by_side)(*args)
+        return out, jax.tree.map(lambda _: True, out)
+
+    return f(*args)
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _merge_stonesoup(J, U, free_mean, free_cov, weights, means, covs, keep):
+    """:func:`_fast_stonesoup`, members of a ``vmap`` in turn on CPU (:func:`_in_turn_on_cpu`)."""
+    return _in_turn_on_cpu(functools.partial(_fast_stonesoup, J), U, free_mean, free_cov, weights, means, covs, keep)
+
+
+def _fast_stonesoup(J, U, free_mean, free_cov, weights, means, covs, keep):
     """Stone Soup's pairwise merging, the same values as :func:`_merge_loops` (``ss`` True) at the
     cost of the work actually done. One ``while_loop`` whose every step either merges a candidate
     into the running component or, when none is left to merge, stores it and seeds the next slot
@@ -205,6 +261,11 @@ def _merge_stonesoup_jvp(J, primals, tangents):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
 def _merge_vo_ma(J, U, free_mean, free_cov, weights, means, covs, keep):
+    """:func:`_fast_vo_ma`, members of a ``vmap`` in turn on CPU (:func:`_in_turn_on_cpu`)."""
+    return _in_turn_on_cpu(functools.partial(_fast_vo_ma, J), U, free_mean, free_cov, weights, means, covs, keep)
+
+
+def _fast_vo_ma(J, U, free_mean, free_cov, weights, means, covs, keep):
     """Table II's merging (Vo & Ma 2006), the values of :func:`_merge_loops` (``ss`` False, to
     rounding: sums are taken chunk by chunk) at the cost of the work actually done. The fixed
     loops run ``J`` passes over all ``K = (1 + M)·J`` candidates however few remain (18.5 ms a
