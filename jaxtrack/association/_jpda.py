@@ -199,6 +199,10 @@ class PDA(AbstractAssociator):
 # The largest cluster (in tracks) that the sparse path solves (2^5 states); larger ones go
 # through the log-space DP.
 SPARSE_CLUSTER_TRACKS = 5
+# Whether the sparse path runs at all (read at trace time). False reproduces the log-space DP's
+# bits everywhere: the multi-target contract tests hold the refactor to results computed before
+# the sparse path existed (the two agree to rounding, tests/test_association_jpda.py).
+SPARSE_PATH = True
 
 
 def _subset_dp(null: Array, pair: Array, unused: Array):
@@ -431,7 +435,7 @@ def _exact_jvp(bits, primals, tangents):
 def _jpda_dense(L: Array, valid: Array) -> tuple[Array, Array, Array]:
     """Exact marginals of one (sub-)problem: ``(beta, log_Z, ok)`` (invalid rows zeroed)."""
     # Padded rows are already inert ([0, -inf, ...]): _prepare, or solve_by_cluster's padding.
-    beta, log_Z = _exact(L, SPARSE_CLUSTER_TRACKS)
+    beta, log_Z = _exact(L, SPARSE_CLUSTER_TRACKS) if SPARSE_PATH else _subset_exact(L)
     beta = jnp.where(valid[:, None], beta, 0.0)
     return beta, log_Z, jnp.isfinite(log_Z)
 
