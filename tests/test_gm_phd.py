@@ -404,6 +404,17 @@ def test_batched_merge_runs_members_in_turn(reduction, monkeypatch):
             np.testing.assert_allclose(np.asarray(b[i]), np.asarray(c), rtol=1e-13, atol=1e-13)
 
 
+def test_undetected_births_false_drops_the_birth_missed_term():
+    """``undetected_births=False``: the first scan's updated intensity lacks exactly the birth
+    component's missed-detection term ``(1 − P_D) w_b`` of Table I (nothing else changes)."""
+    z, valid = _scans(TWO_TARGETS)
+    keep, drop = (run_phd(_small(undetected_births=u), z, valid, warn=False) for u in (True, False))
+    want = (1.0 - SMALL["prob_detect"]) * SMALL["birth_weights"][0]
+    np.testing.assert_allclose(float(keep.updated_cardinality[0] - drop.updated_cardinality[0]), want, rtol=1e-13)
+    with pytest.raises(InputError, match="undetected_births"):
+        _small(undetected_births="no")
+
+
 @pytest.mark.parametrize(
     "kwargs, name",
     [
