@@ -80,7 +80,8 @@ import jaxtrack.multitarget._reduction as reduction_module  # noqa: E402
 from jaxtrack.applications.williams15.scenario import methods as williams_methods  # noqa: E402
 from jaxtrack.applications.williams15.scenario import scenario as williams_scenario  # noqa: E402
 from jaxtrack.filters import ExtendedKalmanFilter  # noqa: E402
-from jaxtrack.multitarget import GMPHD, crossing_targets, simulate_scenarios  # noqa: E402
+from jaxtrack.multitarget import (  # noqa: E402
+    GMPHD, GaussianMixture, StoneSoupReduction, VoMaReduction, crossing_targets, simulate_scenarios)
 from jaxtrack.multitarget._cphd import _run_cphd  # noqa: E402
 from jaxtrack.multitarget._evaluation import _one_run, _positions, score_tracks  # noqa: E402
 from jaxtrack.multitarget._phd import _run_phd  # noqa: E402
@@ -90,13 +91,17 @@ CROSSING_BIRTH_WEIGHT = 0.05
 CUTOFF = 100.0  # m, GOSPA's c on the crossing scenario (the crossing-targets study's)
 
 
-def crossing_phd(scen, reduction="vo-ma", capacity=CROSSING_CAPACITY, max_estimates=None, cls=GMPHD, filter=None):
-    """The crossing scenario's GM-PHD (module docstring); ``cls`` a :class:`GMPHD` subclass."""
+def crossing_phd(scen, reduction="vo-ma", capacity=CROSSING_CAPACITY, max_estimates=None, cls=GMPHD, filter=None,
+                 **options):
+    """The crossing scenario's GM-PHD (module docstring); ``cls`` a :class:`GMPHD` subclass,
+    ``reduction`` ``"vo-ma"``/``"stonesoup"`` or a strategy object."""
     model = scen.model
+    if isinstance(reduction, str):
+        reduction = (StoneSoupReduction if reduction == "stonesoup" else VoMaReduction)(1e-5, 4.0)
     return cls(filter or ExtendedKalmanFilter(), model, prob_survival=0.99, prob_detect=0.9,
-               clutter_density=scen.clutter_density, birth_weights=[CROSSING_BIRTH_WEIGHT],
-               birth_means=[model.initial_mean], birth_covs=[model.initial_cov], capacity=capacity,
-               prune_threshold=1e-5, merge_threshold=4.0, reduction=reduction, max_estimates=max_estimates)
+               clutter_density=scen.clutter_density,
+               birth=GaussianMixture([CROSSING_BIRTH_WEIGHT], [model.initial_mean], [model.initial_cov]),
+               capacity=capacity, reduction=reduction, max_estimates=max_estimates, **options)
 
 
 class Out:

@@ -23,7 +23,7 @@ extracts more), extraction above weight 0.5):
   birth component (weight 0.05, mean 0, standard deviations 80 m and 2 m/s); GOSPA ``c`` = 10 m.
 
 For each scenario, ``--runs`` Monte Carlo runs (run ``i`` from ``fold_in(key 0, i)``, as
-:func:`~jaxtrack.multitarget.tracker_monte_carlo` draws them) are filtered by these variants,
+:func:`~jaxtrack.multitarget.multitarget_monte_carlo` draws them) are filtered by these variants,
 all on the same runs (paired):
 
 - ``vo-ma``: Table I update + Table II reduction (the default); ``stonesoup``: Stone Soup's
@@ -43,8 +43,8 @@ paired interval, GOSPA's parts (localisation, missed, false; m², means over sca
 number of estimates a scan, the capacity events (components left over for want of slots, over
 all runs and scans) and the mean position standard deviation of the extracted components
 (``sqrt`` of the mean position variance, m: a component that absorbed a broad one is wide).
-Then :func:`~jaxtrack.multitarget.tracker_monte_carlo` itself for ``vo-ma`` and ``stonesoup``
-(its ``mean_gospa()`` and ``births_dropped``, which must equal the paired figures).
+Then :func:`~jaxtrack.multitarget.multitarget_monte_carlo` itself for ``vo-ma`` and ``stonesoup``
+(its ``mean_gospa()`` and ``capacity_events``, which must equal the paired figures).
 
 Measured (``benchmarks/measured/phd_reductions.txt``, 100 runs a scenario): the difference is the
 update's missed-detection term of the birth components, not the reduction. Table I keeps
@@ -68,12 +68,10 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import platform
 import sys
 import time
-import types
 import warnings
 
 import jax
@@ -89,10 +87,12 @@ from jaxtrack.filters import KalmanFilter  # noqa: E402
 from jaxtrack.filters._linalg import cholesky_and_inverse  # noqa: E402
 from jaxtrack.models import constant_velocity  # noqa: E402
 from jaxtrack.montecarlo import monte_carlo_map  # noqa: E402
-from jaxtrack.multitarget import GMPHD, CapacityWarning, Scenario, crossing_targets, tracker_monte_carlo  # noqa: E402
+from jaxtrack.multitarget import (  # noqa: E402
+    GMPHD, AbstractMixtureReduction, CapacityWarning, GaussianMixture, Scenario, StoneSoupReduction, VoMaReduction,
+    crossing_targets, multitarget_monte_carlo)
 from jaxtrack.multitarget._evaluation import _positions, score_tracks  # noqa: E402
 from jaxtrack.multitarget._phd import _run_phd  # noqa: E402
-from jaxtrack.multitarget._reduction import _reduce_mixture  # noqa: E402
+from jaxtrack.multitarget._reduction import reduce_mixture  # noqa: E402
 from jaxtrack.multitarget._scenario import _simulate_one  # noqa: E402
 
 from phd_batch import Out, crossing_phd  # noqa: E402
@@ -101,39 +101,43 @@ MAX_ESTIMATES = 24
 BASE = "vo-ma"
 
 
-def _with_reduction(f, reduction):
-    """``f``'s fields with another ``reduction`` (what ``_reduce_mixture`` reads)."""
-    fields = types.SimpleNamespace(**{x.name: getattr(f, x.name) for x in dataclasses.fields(f)})
-    fields.reduction = reduction
-    return fields
+def reduction(name):
+    """The library's strategy for ``"vo-ma"`` or ``"stonesoup"`` (thresholds 1e-5 and 4)."""
+    return (StoneSoupReduction if name == "stonesoup" else VoMaReduction)(1e-5, 4.0)
 
 
-class SwappedReduction(GMPHD):
-    """The update of ``reduction``, the pruning and merging of the other one."""
+class SwappedReduction(AbstractMixtureReduction):
+    """The update conventions of one reduction with the pruning and merging of the other: a
+    strategy whose ``stonesoup_update`` is ``update_stonesoup`` and whose numerics are the other's."""
 
-    def reduce(self, weights, means, covs, active):
-        other = "vo-ma" if self.reduction == "stonesoup" else "stonesoup"
-        return _reduce_mixture(_with_reduction(self, other), weights, means, covs, active)
+    update_stonesoup: bool = eqx.field(static=True)
+
+    def __init__(self, update_stonesoup: bool):
+        self.prune_threshold, self.merge_threshold = jnp.asarray(1e-5), jnp.asarray(4.0)
+        self.update_stonesoup = update_stonesoup
+
+    @property
+    def stonesoup_update(self):
+        return self.update_stonesoup
+
+    def __call__(self, weights, means, covs, active, capacity, free_mean, free_cov):
+        return reduce_mixture(not self.update_stonesoup, self.prune_threshold, self.merge_threshold, capacity,
+                              free_mean, free_cov, weights, means, covs, active)
 
 
-class NoUndetectedBirths(GMPHD):
-    """Table I's update without the birth components' missed-detection term."""
-
-    def update(self, predicted, measurements, valid, k):
-        w, m, P, active, log_norm = GMPHD.update(self, predicted, measurements, valid, k)
-        is_birth = predicted[4]
-        drop = jnp.concatenate([is_birth, jnp.zeros((w.shape[0] - is_birth.shape[0],), bool)])
-        return jnp.where(drop, 0.0, w), m, P, active & ~drop, log_norm
-
-
-class SeedCovarianceMerge(GMPHD):
+class SeedCovarianceMerge(AbstractMixtureReduction):
     """Table II with the merging distance in the seed's covariance, ``(m_i − m_j)ᵀ P_j⁻¹ (m_i − m_j)
     ≤ U``, instead of the candidate's ``P_i`` (the same pruning, passes, moments and budget; fixed
     passes, slower than the library's while loop, the same values otherwise)."""
 
-    def reduce(self, weights, means, covs, active):
+    stonesoup_update = False
+
+    def __init__(self):
+        self.prune_threshold, self.merge_threshold = jnp.asarray(1e-5), jnp.asarray(4.0)
+
+    def __call__(self, weights, means, covs, active, capacity, free_mean, free_cov):
         keep = active & (weights > self.prune_threshold)
-        J, n = self.capacity, means.shape[1]
+        J, n = capacity, means.shape[1]
         _, chol_inv = jax.vmap(cholesky_and_inverse)(covs)
         prec = jnp.einsum("kji,kjl->kil", chol_inv, chol_inv)
 
@@ -150,8 +154,8 @@ class SeedCovarianceMerge(GMPHD):
             dm = mean[None, :] - means
             cov = jnp.sum(wl[:, None, None] * (covs + dm[:, :, None] * dm[:, None, :]), axis=0) / safe
             return remaining & ~L, (w_o.at[slot].set(jnp.where(has, wsum, 0.0)),
-                                    m_o.at[slot].set(jnp.where(has, mean, self.birth_means[0])),
-                                    P_o.at[slot].set(jnp.where(has, cov, self.birth_covs[0])), a_o.at[slot].set(has))
+                                    m_o.at[slot].set(jnp.where(has, mean, free_mean)),
+                                    P_o.at[slot].set(jnp.where(has, cov, free_cov)), a_o.at[slot].set(has))
 
         empty = (jnp.zeros((J,)), jnp.zeros((J, n)), jnp.zeros((J, n, n)), jnp.zeros((J,), bool))
         remaining, out = jax.lax.fori_loop(0, J, one_pass, (keep, empty))
@@ -160,23 +164,24 @@ class SeedCovarianceMerge(GMPHD):
 
 
 class OneEstimatePerComponent(GMPHD):
-    """Extraction of at most one copy of each component above the threshold."""
+    """Extraction of at most one copy of each component above the threshold (a benchmark-only
+    variant of Table III; :meth:`GMPHD._extract` is what the runs record)."""
 
-    def estimates(self, mixture):
-        return GMPHD.estimates(self, eqx.tree_at(lambda x: x.weights, mixture, jnp.minimum(mixture.weights, 1.0)))
+    def _extract(self, mixture):
+        return GMPHD._extract(self, eqx.tree_at(lambda x: x.weights, mixture, jnp.minimum(mixture.weights, 1.0)))
 
 
 def variants(make):
-    """``make(cls, reduction, capacity)`` -> a GM-PHD; the variants of the module docstring."""
+    """``make(cls, reduction strategy, capacity, **options)`` -> a GM-PHD; the module docstring's variants."""
     return {
-        "vo-ma": make(GMPHD, "vo-ma", 100),
-        "stonesoup": make(GMPHD, "stonesoup", 100),
-        "vo-ma, capacity 200": make(GMPHD, "vo-ma", 200),
-        "vo-ma update + stonesoup reduction": make(SwappedReduction, "vo-ma", 100),
-        "stonesoup update + vo-ma reduction": make(SwappedReduction, "stonesoup", 100),
-        "vo-ma without undetected births": make(NoUndetectedBirths, "vo-ma", 100),
-        "vo-ma, distance in the seed's P_j": make(SeedCovarianceMerge, "vo-ma", 100),
-        "vo-ma, one estimate per component": make(OneEstimatePerComponent, "vo-ma", 100),
+        "vo-ma": make(GMPHD, reduction("vo-ma"), 100),
+        "stonesoup": make(GMPHD, reduction("stonesoup"), 100),
+        "vo-ma, capacity 200": make(GMPHD, reduction("vo-ma"), 200),
+        "vo-ma update + stonesoup reduction": make(GMPHD, SwappedReduction(update_stonesoup=False), 100),
+        "stonesoup update + vo-ma reduction": make(GMPHD, SwappedReduction(update_stonesoup=True), 100),
+        "vo-ma without undetected births": make(GMPHD, reduction("vo-ma"), 100, undetected_births=False),
+        "vo-ma, distance in the seed's P_j": make(GMPHD, SeedCovarianceMerge(), 100),
+        "vo-ma, one estimate per component": make(OneEstimatePerComponent, reduction("vo-ma"), 100),
     }
 
 
@@ -227,13 +232,13 @@ def compare(label, scen, methods, cutoff, runs, out):
     for name in ("vo-ma", "stonesoup"):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            r = tracker_monte_carlo(methods[name], scen, 0, R, cutoff=cutoff, block_size=32)
+            r = multitarget_monte_carlo(methods[name], scen, 0, R, cutoff=cutoff, block_size=32)
         warned = any(issubclass(w.category, CapacityWarning) for w in caught)
         assert abs(r.mean_gospa() - rows[name]["gospa"]) <= 1e-9 * max(1.0, rows[name]["gospa"]), (
             r.mean_gospa(), rows[name]["gospa"])
-        assert r.births_dropped == rows[name]["events"], (r.births_dropped, rows[name]["events"])
-        out(f"  tracker_monte_carlo({name}): mean_gospa() {r.mean_gospa():.2f} m, capacity events "
-            f"{r.births_dropped}{' (CapacityWarning)' if warned else ''}")
+        assert r.capacity_events == rows[name]["events"], (r.capacity_events, rows[name]["events"])
+        out(f"  multitarget_monte_carlo({name}): mean_gospa() {r.mean_gospa():.2f} m, capacity events "
+            f"{r.capacity_events}{' (CapacityWarning)' if warned else ''}")
     return rows
 
 
@@ -257,38 +262,36 @@ def main(argv=None):
     out = Out(a.out)
     out(f"# {time.strftime('%Y-%m-%d')} python {' '.join(sys.argv)}")
     out(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, float64; "
-        f"jaxtrack from {os.path.dirname(os.path.dirname(_reduce_mixture.__code__.co_filename))}")
+        f"jaxtrack from {os.path.dirname(os.path.dirname(reduce_mixture.__code__.co_filename))}")
     out("# GOSPA parts (loc, missed, false) in m², means over runs and scans; σ_pos: the extracted components' "
         "position standard deviation")
-    common = dict(prune_threshold=1e-5, merge_threshold=4.0, max_estimates=MAX_ESTIMATES)
+    common = dict(max_estimates=MAX_ESTIMATES)
     for which in a.scenarios:
         if which == "crossing":
             scen = crossing_targets()
 
-            def make(cls, reduction, capacity, scen=scen):
-                return crossing_phd(scen, reduction, capacity, MAX_ESTIMATES, cls)
+            def make(cls, strategy, capacity, scen=scen, **options):
+                return crossing_phd(scen, strategy, capacity, MAX_ESTIMATES, cls, **options)
 
             compare("crossing (crossing_targets(), EKF GM-PHD)", scen, variants(make), 100.0, a.runs, out)
         elif which == "williams":
             scen, s = williams_scenario()
 
-            def make(cls, reduction, capacity, scen=scen, s=s):
+            def make(cls, strategy, capacity, scen=scen, s=s, **options):
                 return cls(KalmanFilter(), scen.model, prob_survival=s.prob_survival, prob_detect=s.prob_detect,
-                           clutter_density=s.clutter_density, birth_weights=s.birth_weights,
-                           birth_means=s.birth_means, birth_covs=s.birth_covs, initial_weights=s.initial_weights,
-                           initial_means=s.initial_means, initial_covs=s.initial_covs,
-                           capacity=capacity, reduction=reduction, **common)
+                           clutter_density=s.clutter_density, birth=s.birth, initial=s.initial,
+                           capacity=capacity, reduction=strategy, **common, **options)
 
             compare("Williams (2015) (williams15(9), the study's Kalman GM-PHD)", scen, variants(make),
                     s.gospa_cutoff, a.runs, out)
         elif which == "sparse":
             scen = sparse_scenario()
 
-            def make(cls, reduction, capacity, scen=scen):
+            def make(cls, strategy, capacity, scen=scen, **options):
                 m = scen.model
                 return cls(KalmanFilter(), m, prob_survival=0.99, prob_detect=0.9, clutter_density=scen.clutter_density,
-                           birth_weights=[0.05], birth_means=[m.initial_mean], birth_covs=[m.initial_cov],
-                           capacity=capacity, reduction=reduction, **common)
+                           birth=GaussianMixture([0.05], [m.initial_mean], [m.initial_cov]),
+                           capacity=capacity, reduction=strategy, **common, **options)
 
             compare("sparse (5 targets, 1 clutter point a scan, Kalman GM-PHD)", scen, variants(make), 10.0,
                     a.runs, out)
