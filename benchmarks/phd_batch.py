@@ -91,6 +91,14 @@ CROSSING_BIRTH_WEIGHT = 0.05
 CUTOFF = 100.0  # m, GOSPA's c on the crossing scenario (the crossing-targets study's)
 
 
+def _where(path: str) -> str:
+    """Which jaxtrack ran: the checkout's own (relative), or another installation, without a
+    machine path in the measured file."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    path = os.path.abspath(path)
+    return os.path.relpath(path, root) if path.startswith(root + os.sep) else "an installed jaxtrack outside the checkout"
+
+
 def crossing_phd(scen, reduction="vo-ma", capacity=CROSSING_CAPACITY, max_estimates=None, cls=GMPHD, filter=None,
                  **options):
     """The crossing scenario's GM-PHD (module docstring); ``cls`` a :class:`GMPHD` subclass,
@@ -218,7 +226,7 @@ def main(argv=None):
     out(f"# {time.strftime('%Y-%m-%d')} python {' '.join(sys.argv)}")
     out(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, "
         f"backend {jax.default_backend()}, float64; load average before {os.getloadavg()[0]:.2f}")
-    out(f"# jaxtrack from {os.path.dirname(reduction_module.__file__)}")
+    out(f"# jaxtrack from {_where(reduction_module.__file__)}")
     out(f"# medians of {a.repeats} interleaved rounds; per run over a batch of {a.runs} runs; "
         "ratios: batch per run / one run (wall, CPU)")
     out(f"\n  {'filter':<34}{'how':<22}{'wall ms':>10}{'CPU ms':>10}{'ratio wall, CPU':>16}")

@@ -95,7 +95,7 @@ from jaxtrack.multitarget._phd import _run_phd  # noqa: E402
 from jaxtrack.multitarget._reduction import reduce_mixture  # noqa: E402
 from jaxtrack.multitarget._scenario import _simulate_one  # noqa: E402
 
-from phd_batch import Out, crossing_phd  # noqa: E402
+from phd_batch import Out, _where, crossing_phd  # noqa: E402
 
 MAX_ESTIMATES = 24
 BASE = "vo-ma"
@@ -262,7 +262,7 @@ def main(argv=None):
     out = Out(a.out)
     out(f"# {time.strftime('%Y-%m-%d')} python {' '.join(sys.argv)}")
     out(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, float64; "
-        f"jaxtrack from {os.path.dirname(os.path.dirname(reduce_mixture.__code__.co_filename))}")
+        f"jaxtrack from {_where(os.path.dirname(reduce_mixture.__code__.co_filename))}")
     out("# GOSPA parts (loc, missed, false) in m², means over runs and scans; σ_pos: the extracted components' "
         "position standard deviation")
     common = dict(max_estimates=MAX_ESTIMATES)
