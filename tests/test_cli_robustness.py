@@ -261,6 +261,18 @@ def _assert_interrupted(child, latency, out=None):
         assert (list(out.rglob("*")) if out.exists() else []) == []
 
 
+def _interrupted(argv, ready="", at_least_s=0.0, signals=1):
+    """Start ``argv``, wait for ``ready`` on its stderr (and ``at_least_s``), send ``signals``
+    Ctrl-Cs; ``(child, latency)`` once it stopped (within 10 s)."""
+    child = _Child(argv)
+    try:
+        child.wait_for(ready, at_least_s=at_least_s)
+        latency = child.interrupt(stop_within_s=10, signals=signals)
+    finally:
+        child.close()
+    return child, latency
+
+
 @pytest.mark.parametrize("at_s", [1, 5, 15])
 def test_ctrl_c_stops_the_multitarget_study_at_any_time(tmp_path, sigint_raises, at_s):
     # The study takes ~40 s warm (minutes cold). At 1 s it is importing JAX, SciPy and equinox
@@ -268,12 +280,8 @@ def test_ctrl_c_stops_the_multitarget_study_at_any_time(tmp_path, sigint_raises,
     # Ctrl-Cs in JAX's gc callback), at 5 s importing, tracing or compiling, at 15 s compiling or
     # running. Bound: 3 s of grace at most, plus a loaded machine.
     out = tmp_path / "mt"
-    child = _Child([sys.executable, "-m", "jaxtrack", "reproduce", "multitarget", "--out", str(out)])
-    try:
-        child.wait_for("", at_least_s=at_s)
-        latency = child.interrupt(stop_within_s=10)
-    finally:
-        child.close()
+    child, latency = _interrupted([sys.executable, "-m", "jaxtrack", "reproduce", "multitarget", "--out", str(out)],
+                                  at_least_s=at_s)
     print(f"reproduce multitarget, Ctrl-C at {at_s} s: exit {child.proc.returncode} after {latency} s")
     _assert_interrupted(child, latency, out)
 
@@ -294,12 +302,7 @@ sys.exit(cli.main())
 
 def test_ctrl_c_inside_a_garbage_collector_callback_is_not_lost(tmp_path, sigint_raises):
     out = tmp_path / "mt"
-    child = _Child([sys.executable, "-c", _SLOW_GC, str(out)])
-    try:
-        child.wait_for("child: ready", at_least_s=2)
-        latency = child.interrupt(stop_within_s=10)
-    finally:
-        child.close()
+    child, latency = _interrupted([sys.executable, "-c", _SLOW_GC, str(out)], "child: ready", at_least_s=2)
     print(f"Ctrl-C inside a collector callback: exit {child.proc.returncode} after {latency} s")
     _assert_interrupted(child, latency, out)
 
@@ -324,12 +327,8 @@ sys.exit(cli.main())
 
 @pytest.mark.parametrize("signals", [1, 2])
 def test_ctrl_c_swallowed_by_the_command_still_ends_it(tmp_path, sigint_raises, signals):
-    child = _Child([sys.executable, "-c", _SWALLOW, str(tmp_path / "demo")])
-    try:
-        child.wait_for("child: running")
-        latency = child.interrupt(stop_within_s=10, signals=signals)
-    finally:
-        child.close()
+    child, latency = _interrupted([sys.executable, "-c", _SWALLOW, str(tmp_path / "demo")], "child: running",
+                                  signals=signals)
     print(f"{signals} Ctrl-C to a command that swallows them: exit {child.proc.returncode} after {latency} s")
     _assert_interrupted(child, latency)
     if signals == 1:

@@ -49,7 +49,6 @@ from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
 from ._phd import (
     GMPHDMixture,
-    _check_scans,
     _common_fields,
     AbstractGaussianMixtureFilter,
     _initial_mixture_checked,
@@ -59,7 +58,7 @@ from ._phd import (
     _scalar,
     _updated_layout,
 )
-from ._base import Estimates, scan_method, scan_ok, warn_capacity
+from ._base import Estimates, check_scans, scan_method, scan_ok, warn_capacity
 from ._mixture import (
     AbstractMixtureReduction,
     GaussianMixture,
@@ -518,7 +517,7 @@ def run_cphd(cphd: GMCPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: b
     """
     if not isinstance(cphd, GMCPHD):
         raise InputError(f"`cphd` must be a GMCPHD; got {type(cphd).__name__}.")
-    measurements, valid = _check_scans(measurements, valid, cphd.model.meas_dim)
+    measurements, valid = check_scans(measurements, valid, cphd.model.meas_dim)
     result = _run_cphd(cphd, measurements, valid)
     if warn:
         warn_capacity(cphd, result.final.mixture.num_dropped)

@@ -29,7 +29,7 @@ from .._validation import InputError, as_key
 from ..models._layout import position_indices
 from ..montecarlo._engine import MonteCarloInterrupted, block_size_for, masked_run_sums, refuse_traced, run_blocks
 from ..montecarlo._ospa import GOSPA, gospa
-from ._base import AbstractMultiTargetFilter, check_method, scan_method
+from ._base import AbstractMultiTargetFilter, _record_estimates, check_method, scan_method
 from ._scenario import CapacityWarning, Scenario, _check_scenario, _simulate_one
 
 
@@ -196,10 +196,6 @@ class MultiTargetMonteCarloResult(Exportable, eqx.Module):
 
 
 TrackerMonteCarloResult = MultiTargetMonteCarloResult  # the former name
-
-
-def _record_estimates(method, state, info):
-    return method.estimates(state), info.ok, method.capacity_events(state)
 
 
 def _one_run(key, args):

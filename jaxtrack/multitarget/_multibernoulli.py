@@ -21,13 +21,13 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
-from ._base import Estimates, scan_method, scan_ok
+from ._base import Estimates, check_scans, scan_method, scan_ok
 from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
+from ._clutter import resolve_clutter
 from ._mixture import AbstractMixtureReduction, GaussianMixture, legacy_mixture, legacy_reduction, reject_unknown
 from ._phd import (
     AbstractGaussianMixtureFilter,
-    _check_scans,
     _common_fields,
     _in_slots,
     _initial_mixture_checked,
@@ -136,11 +136,12 @@ def _hypothesis_existence_sums(state):
 # placement of new tracks, estimates.
 
 
-def _mb_fields(filter, model, *, prob_survival, prob_detect, clutter_density, birth, initial, poisson_capacity,
+def _mb_fields(filter, model, *, prob_survival, prob_detect, clutter: dict, birth, initial, poisson_capacity,
                max_tracks, poisson_reduction, existence_threshold, estimation_threshold, gate, deprecated: dict,
                cls: str) -> dict:
     """The checked fields of :class:`PMBM` and :class:`~jaxtrack.multitarget.PMB` (as documented
-    there); ``deprecated`` holds the former keywords (``birth_*``, ``initial_*``,
+    there); ``clutter`` the clutter keywords (:func:`._clutter.resolve_clutter`), ``deprecated`` the
+    former keywords (``birth_*``, ``initial_*``,
     ``poisson_prune_threshold``, ``poisson_merge_threshold``)."""
     n = model.state_dim if isinstance(model, AbstractStateSpaceModel) else 0
     birth = legacy_mixture("birth", deprecated, birth, n, required=True)
@@ -159,7 +160,7 @@ def _mb_fields(filter, model, *, prob_survival, prob_detect, clutter_density, bi
         "prob_detect": base["prob_detect"],
         # κ = 0 would make a measurement no Poisson component or track reaches impossible (its new
         # track's weight log(e + κ) = −inf, an infeasible assignment): refused, as the PMB always did.
-        "clutter_density": _scalar("clutter_density", clutter_density, low=0.0, open_low=True),
+        "clutter_density": _scalar("clutter_density", resolve_clutter(cls, **clutter)[0], low=0.0, open_low=True),
         "birth": base["birth"], "initial": initial, "poisson_reduction": poisson_reduction,
         "poisson_capacity": base["capacity"], "max_tracks": _positive_int("max_tracks", max_tracks),
         "existence_threshold": _scalar("existence_threshold", existence_threshold, low=0.0, high=1.0),
@@ -523,7 +524,7 @@ def run_pmbm(mb, measurements: ArrayLike, valid: ArrayLike, *, warn: bool = True
     """
     if not isinstance(mb, AbstractMultiBernoulliFilter):
         raise InputError(f"`mb` must be a PMBM or PMB filter; got {type(mb).__name__}.")
-    measurements, valid = _check_scans(measurements, valid, mb.model.meas_dim)
+    measurements, valid = check_scans(measurements, valid, mb.model.meas_dim)
     result = _run(mb, measurements, valid)
     if warn and is_concrete(result.overflow) and bool(result.overflow):
         fs = result.final

@@ -279,11 +279,6 @@ def _updated_layout(w_miss, miss_active, w_det, pair, means, covs, cond):
     return weights, m, P, active
 
 
-def _check_scans(measurements, valid, meas_dim):
-    """``(measurements, valid)`` checked (:func:`._base.check_scans`)."""
-    return check_scans(measurements, valid, meas_dim)
-
-
 class GMPHD(AbstractGaussianMixtureFilter):
     r"""The GM-PHD filter of Vo & Ma (2006) with a fixed component budget ``J_max``.
 
@@ -605,7 +600,7 @@ def run_phd(phd: GMPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: bool
     """
     if not isinstance(phd, GMPHD):
         raise InputError(f"`phd` must be a GMPHD; got {type(phd).__name__}.")
-    measurements, valid = _check_scans(measurements, valid, phd.model.meas_dim)
+    measurements, valid = check_scans(measurements, valid, phd.model.meas_dim)
     result = _run_phd(phd, measurements, valid)
     if warn:
         warn_capacity(phd, result.final.num_dropped)

@@ -61,7 +61,6 @@ from jaxtyping import Array, Float
 
 from .._validation import InputError, is_concrete
 from ..association._murty import k_best_assignments
-from ._clutter import resolve_clutter
 from ._multibernoulli import (
     AbstractGlobalHypotheses,
     AbstractMultiBernoulliFilter,
@@ -165,9 +164,8 @@ class PMBM(AbstractMultiBernoulliFilter):
                  hypotheses: AbstractGlobalHypotheses | None = None, **deprecated):
         fields = _mb_fields(
             filter, model, prob_survival=prob_survival, prob_detect=prob_detect,
-            clutter_density=resolve_clutter("PMBM", clutter_density=clutter_density,
-                                            clutter_spatial_density=clutter_spatial_density,
-                                            clutter_rate=clutter_rate, clutter_volume=clutter_volume)[0],
+            clutter=dict(clutter_density=clutter_density, clutter_spatial_density=clutter_spatial_density,
+                         clutter_rate=clutter_rate, clutter_volume=clutter_volume),
             birth=birth, initial=initial, poisson_capacity=poisson_capacity, max_tracks=max_tracks,
             poisson_reduction=poisson_reduction, existence_threshold=existence_threshold,
             estimation_threshold=estimation_threshold, gate=gate, deprecated=deprecated, cls="PMBM",

@@ -681,7 +681,6 @@ def run_tracker(
             "`measurements` must be (T, M, m) and `valid` (T, M); got "
             f"{measurements.shape} and {valid.shape}."
         )
-    check_measurement_dim(tracker, measurements)
     measurements, valid = check_scans(measurements, valid, tracker.model.meas_dim)
     result = _run_tracker(tracker, measurements, valid, save_cov)
     if warn:
