@@ -116,11 +116,31 @@ def test_every_family_runs_through_the_one_monte_carlo_as_before(case, reference
 
 def test_monte_carlo_result_exports_and_loads(case, tmp_path):
     scen, methods, _, _ = case
-    mc = _quiet(multitarget_monte_carlo, methods["jpda"], scen, MC_KEY, 6, cutoff=CUTOFF, block_size=2)
+    # The parametrised test's sizes: its compiled block is reused (a new key is a new argument).
+    mc = _quiet(multitarget_monte_carlo, methods["jpda"], scen, MC_KEY + 1, MC_RUNS, cutoff=CUTOFF,
+                block_size=MC_RUNS)
     back = MultiTargetMonteCarloResult.load(mc.save(tmp_path / "mc.npz"))
     np.testing.assert_array_equal(back.per_run_gospa, mc.per_run_gospa)
     np.testing.assert_array_equal(back.scores.num_switches, mc.scores.num_switches)
-    assert (back.num_runs, back.method_name, back.completed) == (6, "Tracker", True)
+    assert (back.num_runs, back.method_name, back.completed) == (MC_RUNS, "Tracker", True)
+
+
+def test_the_monte_carlo_program_has_no_host_callback(case):
+    """A host callback keeps a program out of JAX's persistent compilation cache, so that a
+    second process (the CLI's next run, the notebooks after the tests) compiles every
+    multi-target Monte Carlo again. GOSPA's checked Python-float cut-off once carried one: an
+    ``equinox.error_if`` on ``jnp.asarray(cutoff)``, which under ``jit`` is a tracer too."""
+    from jaxtrack.multitarget._evaluation import _one_run, _positions
+
+    scen, methods, _, _ = case
+    method = methods["phd"]
+    args = (method, scen, np.asarray(_positions(scen.model.state_layout, "s")),
+            np.asarray(_positions(method.model.state_layout, "m")), CUTOFF, 2.0)
+    jaxpr = str(jax.make_jaxpr(lambda key: _one_run(key, args))(jax.random.key(0)))
+    assert "callback" not in jaxpr
+    # The guard sees one: a traced cut-off keeps its run-time check.
+    traced = str(jax.make_jaxpr(lambda key, c: _one_run(key, args[:4] + (c, 2.0)))(jax.random.key(0), CUTOFF))
+    assert "callback" in traced
 
 
 def test_an_interrupted_monte_carlo_hands_back_the_finished_blocks(case, monkeypatch):

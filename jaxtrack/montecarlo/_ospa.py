@@ -122,10 +122,14 @@ def _check(truth, truth_valid, estimates, estimates_valid, cutoff, order):
     # Not a NaN metric (_validation.nan_where_traced): c and p are the caller's settings, the same
     # for every run of a batch, not a per-run failure that a `throw=False` caller reads per run;
     # a NaN distance in every run would only say "something is wrong", not what.
+    # Concreteness of the caller's value, not of the converted array: under `jit`, `jnp.asarray`
+    # of a Python float is a tracer too, and an `error_if` (a host callback) on an already checked
+    # constant would make every program that scores GOSPA (the multi-target Monte Carlo's blocks)
+    # ineligible for JAX's persistent compilation cache.
     c, p = jnp.asarray(cutoff, dtype), jnp.asarray(order, dtype)
-    if not is_concrete(c):
+    if not is_concrete(cutoff):
         c = eqx.error_if(c, ~((c > 0) & (c < jnp.inf)), "gospa/ospa: `cutoff` must be a finite c > 0.")
-    if not is_concrete(p):
+    if not is_concrete(order):
         p = eqx.error_if(p, ~((p >= 1) & (p < jnp.inf)), "gospa/ospa: `order` must be a finite p >= 1.")
     return truth.astype(dtype), truth_valid, estimates.astype(dtype), estimates_valid, c, p
 
