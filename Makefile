@@ -65,8 +65,8 @@ demo: $(STAMP)
 # The suite runs as three pytest sessions, each on two worker processes (pytest-xdist, one per
 # core; XDIST= runs them in one process each): the two halves of the suite by file name, then the
 # fault-injection cases (JAX in worker threads, some ending in runtime errors raised from XLA
-# callbacks) with the property tests (many compilations) and the multi-target contract's bit-for-bit
-# comparison, at XLA's fusion emitters (JAXTRACK_TEST_FUSION_EMITTERS=1: the other sessions compile
+# callbacks) with the property tests (many compilations) and the modules held to XLA's fusion
+# emitters' rounding (the multi-target contract, the square-root filters), at those emitters (JAXTRACK_TEST_FUSION_EMITTERS=1: the other sessions compile
 # with the former CPU emitters, in less than half the time; tests/conftest.py). Each test module is one work unit of a
 # worker, longest first (tests/conftest.py). XLA's CPU compiler has crashed (SIGSEGV inside
 # backend_compile) twice late in a long single process (after ~500 tests, in an unremarkable
@@ -82,7 +82,7 @@ demo: $(STAMP)
 # rerun once; a second failure fails make test.
 # Where the time goes: JAXTRACK_TEST_PROFILE=DIR make test, then python tools/suite_profile.py DIR
 # (per module: wall, XLA compile, trace seconds; about 80% of the suite is JAX compiling and tracing).
-ISOLATED := tests/test_faults.py tests/test_properties.py tests/test_multitarget_contract.py
+ISOLATED := tests/test_faults.py tests/test_properties.py tests/test_multitarget_contract.py tests/test_square_root.py
 SIGNALS  := tests/test_cli_robustness.py
 # tests/conftest.py compiles the suite with most of XLA's optimisations off (LLVM -O0; most modules
 # are compile-bound: 2301 -> 2163 worker-s), and the few runtime-bound modules (pytest.mark.

@@ -114,7 +114,9 @@ def test_monte_carlo_map_is_replayable_and_chunk_independent():
         for name in sums:
             np.testing.assert_array_equal(other[name], sums[name])
     assert stacked["x"].shape == (1000, 3)
-    np.testing.assert_array_equal(stacked["x"][417], _draws(jax.random.fold_in(key, 417), scale)["x"])
+    # Run 417 replayed on its own: the same draws, to rounding (the block's fused program and
+    # the eager calls may round the normal's transform differently in the last bit).
+    np.testing.assert_allclose(stacked["x"][417], _draws(jax.random.fold_in(key, 417), scale)["x"], rtol=4e-16)
     np.testing.assert_allclose(stacked["x"].sum(0), sums["x"], rtol=1e-12, atol=1e-12)
     assert int(sums["positive"]) == int(np.sum(stacked["positive"]))
     # The statistic is right: E[x²] = 4 per component, within 5 standard errors (var x² = 2·16).

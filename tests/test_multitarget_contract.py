@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import os
 import warnings
 from typing import NamedTuple
 
@@ -18,7 +17,6 @@ import jax
 import numpy as np
 import pytest
 
-from conftest import LEGACY_EMITTERS_FLAG
 from _multitarget_cases import CUTOFF, MC_KEY, MC_RUNS, REFERENCE, RUN_KEY, _fields, methods, scenario
 from jaxtrack.multitarget import (
     AbstractMultiTargetFilter,
@@ -34,15 +32,9 @@ from jaxtrack.multitarget import (
 
 RUNS = {"phd": run_phd, "cphd": run_cphd, "pmb": run_pmbm, "pmbm": run_pmbm, "jpda": run_tracker}
 
-# The reference was computed with XLA:CPU's fusion emitters; the suite's first two sessions compile
-# with the former emitters (tests/conftest.py), which round some results differently. make test
-# runs this module in its last session, with the fusion emitters (tests/test_suite_levels.py
-# checks the Makefile says so).
-pytestmark = pytest.mark.skipif(
-    LEGACY_EMITTERS_FLAG in os.environ.get("XLA_FLAGS", ""),
-    reason="bit-for-bit against a reference computed with XLA's fusion emitters: run with "
-    "JAXTRACK_TEST_FUSION_EMITTERS=1 (make test's last session does)",
-)
+# The reference was computed with XLA:CPU's fusion emitters, which the suite's first two sessions
+# do not use (tests/conftest.py): make test runs this module in its last session.
+pytestmark = pytest.mark.fusion_emitters
 
 
 @pytest.fixture(scope="module", autouse=True)

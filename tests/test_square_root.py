@@ -27,6 +27,12 @@ from jaxtrack.montecarlo import chi2_mean_bounds, monte_carlo, simulate
 
 from helpers import assert_close, random_linear_model, simulate_linear
 
+# The float64 comparisons run on random models whose states grow to 1e9 over 1,000 steps: XLA's
+# former CPU emitters (the suite's first sessions, tests/conftest.py) round the two filters'
+# common mean arithmetic differently and the growth carries that to 2e-6 relative; make test
+# runs this module with the fusion emitters, as users compile.
+pytestmark = pytest.mark.fusion_emitters
+
 FIELDS = ("filtered_mean", "filtered_cov", "predicted_mean", "predicted_cov", "innovation",
           "innovation_cov", "log_likelihood", "final_cov")
 
