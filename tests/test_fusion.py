@@ -371,7 +371,7 @@ def _optimal_fusion_outputs(x1, P1, x2, P2, E, criterion):
 
 
 def test_gradients_of_fixed_and_optimal_weight_fusion_match_finite_differences():
-    x1, P1, x2, P2 = _cases(11, 2, dims=(4,))[1]
+    x1, P1, x2, P2 = _cases(11, 1, dims=(4,))[0]  # optimal ω 0.49 (trace), 0.74 (det)
     # d/dω at a fixed ω of the fused trace and of a mean component.
     trace_of = lambda w: jnp.trace(_ci(x1, P1, x2, P2, w).cov)  # noqa: E731
     mean_of = lambda w: _ci(x1, P1, x2, P2, w).mean[0]  # noqa: E731
@@ -387,6 +387,7 @@ def test_gradients_of_fixed_and_optimal_weight_fusion_match_finite_differences()
     for at_bound, (a1, A1, a2, A2), criterion in ((False, interior, "trace"), (False, interior, "det"),
                                                    (True, boundary, "det")):
         fs = _optimal_fusion_outputs(a1, A1, a2, A2, E, criterion)
+        assert (float(fs["weight"](0.0)) == 1.0) if at_bound else (0.05 < float(fs["weight"](0.0)) < 0.95)
         for name, f in fs.items():
             _, d = jax.jvp(f, (0.0,), (1.0,))
             fd = _central(lambda t, f=f: float(f(t)), 0.0, 1e-5)
