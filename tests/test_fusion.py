@@ -267,6 +267,9 @@ def test_ellipsoidal_intersection_properties_from_the_paper():
         out = _ei(x1, np.diag(a), x2, np.diag(b))
         assert_close(out.cov, np.diag(np.minimum(a, b)), 1e-13)
         assert_close(out.mean, np.where(a < b, x1, x2), 1e-13)
+    # The strategy object is the function (eagerly, no jit).
+    rule = fusion.EllipsoidalIntersection()
+    assert_close(rule.fuse(x1, np.diag(a), x2, np.diag(b)).mean, out.mean, 1e-15)
 
 
 # --- the two-sensor run ---------------------------------------------------------------------
