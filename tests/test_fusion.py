@@ -207,12 +207,13 @@ def _fused_error_cov(P, Y1, Y2, joint):
 
 
 def _correlated_joint(rng, n):
-    """A valid joint covariance of (e1, e2) with a common part: e_i = M_i a + b_i."""
+    """A valid joint covariance of (e1, e2) with a common part, e_i = M_i a + b_i, and the
+    covariances of the independent parts b_1, b_2."""
     Pa = random_spd(rng, n, 100.0)
     M1, M2 = np.eye(n) + 0.3 * rng.standard_normal((n, n)), np.eye(n) + 0.3 * rng.standard_normal((n, n))
     B1, B2 = random_spd(rng, n, 100.0, rng.uniform(0.05, 1)), random_spd(rng, n, 100.0, rng.uniform(0.05, 1))
     M = np.vstack([M1, M2])
-    return M @ Pa @ M.T + np.block([[B1, np.zeros((n, n))], [np.zeros((n, n)), B2]]), B1, B2, M, Pa
+    return M @ Pa @ M.T + np.block([[B1, np.zeros((n, n))], [np.zeros((n, n)), B2]]), B1, B2
 
 
 def test_ci_and_split_ci_bound_the_actual_error_covariance():
@@ -222,7 +223,7 @@ def test_ci_and_split_ci_bound_the_actual_error_covariance():
     naive_failures = 0
     for i in range(20):
         n = (2, 4)[i % 2]
-        joint, B1, B2, _, _ = _correlated_joint(rng, n)
+        joint, B1, B2 = _correlated_joint(rng, n)
         P1, P2 = joint[:n, :n], joint[n:, n:]
         x = np.zeros(n)
         for w in (rng.uniform(0, 1), None):
