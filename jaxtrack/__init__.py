@@ -21,7 +21,7 @@ __version__ = "0.1.0"
 
 _SUBPACKAGES = (
     "filters", "models", "montecarlo", "covariance", "sensitivity", "learning", "bounds",
-    "association", "multitarget",
+    "association", "fusion", "multitarget",
 )
 __all__ = [*_SUBPACKAGES, "InputError", "__version__"]
 

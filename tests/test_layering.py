@@ -80,3 +80,22 @@ def test_base_does_not_reach_the_scan_strategies_or_run_filter():
     assert not circle, f"jaxtrack.filters._base imports (directly or not) {sorted(circle)}, which import it"
     assert "jaxtrack.filters._base" in graph["jaxtrack.filters._parallel"]
     assert {"jaxtrack.filters._base", "jaxtrack.filters._parallel"} <= graph["jaxtrack.filters._run"]
+
+
+def test_fusion_imports_only_the_filters_and_below():
+    # jaxtrack.fusion sits above the filters and below the multi-target layer: it may import
+    # itself, the filters, the models, the geometry and the private helpers; never montecarlo
+    # (runs are simulated by the caller), multitarget, applications or the CLI.
+    fusion = ROOT / "jaxtrack" / "fusion"
+    below = ("jaxtrack.fusion",) + BELOW_FILTERS
+
+    def allowed(name: str) -> bool:
+        parts = name.split(".")
+        return (len(parts) == 1 or parts[1].startswith("_")
+                or any(name == layer or name.startswith(layer + ".") for layer in below))
+
+    graph = {p.stem: {n for n in imported_modules(p, "jaxtrack.fusion") if n.startswith("jaxtrack")}
+             for p in sorted(fusion.glob("*.py"))}
+    assert "jaxtrack.filters._kalman" in graph["_track"]  # the parser read the sources
+    upward = {(module, name) for module, names in graph.items() for name in names if not allowed(name)}
+    assert not upward, f"fusion/ imports from a layer above it: {sorted(upward)}"

@@ -55,6 +55,7 @@ PUBLIC_MODULES = (
     "bounds",
     "plotting",
     "association",
+    "fusion",
     "multitarget",
 )
 # Names of the top-level ``jaxtrack.__all__`` that are documented objects (the rest are the
