@@ -113,6 +113,33 @@ def test_a_jpda_cluster_beyond_its_caps_is_counted_and_warned(case):
     assert any(issubclass(w.category, CapacityWarning) and "association" in str(w.message) for w in caught)
 
 
+@pytest.mark.parametrize("family", ["phd", "cphd"])
+def test_estimates_beyond_max_estimates_are_counted_and_warned(case, family):
+    """A GM-(C)PHD with one estimate slot on a scenario of several targets: the estimates that do
+    not fit are counted as capacity events (they were dropped without a word before) and warned."""
+    from jaxtrack.multitarget import GMCPHD, run_cphd, run_phd
+
+    scen, s, _, z, v = case
+    common = dict(prob_survival=s.prob_survival, prob_detect=s.prob_detect, birth=s.birth, initial=s.initial,
+                  clutter_density=s.clutter_density, capacity=24, max_estimates=1)
+    if family == "phd":
+        method, run = GMPHD(KalmanFilter(), scen.model, **common), run_phd
+    else:
+        method, run = GMCPHD(KalmanFilter(), scen.model, clutter_rate=s.clutter_rate, max_cardinality=12,
+                             **common), run_cphd
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = run_multitarget(method, z, v)
+    detail = run(method, z, v, warn=False)
+    found = np.asarray(detail.num_estimates if family == "phd" else detail.map_cardinality)
+    expected = int(np.sum(np.maximum(found - 1, 0)))
+    assert expected > 0  # the case has several targets
+    mixture = result.final if family == "phd" else result.final.mixture
+    assert int(mixture.num_unreported) == expected
+    assert int(result.capacity_events[-1]) == expected + int(mixture.num_dropped)
+    assert any(issubclass(w.category, CapacityWarning) and "max_estimates=1" in str(w.message) for w in caught)
+
+
 def test_a_step_jitted_by_hand_compiles(case):
     """``jax.jit(lambda s, z, v: tracker.step(s, z, v))`` (the tracker closed over): its parameter
     checks used to inspect a staged comparison and raised TracerArrayConversionError."""

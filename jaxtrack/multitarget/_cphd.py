@@ -453,8 +453,9 @@ class GMCPHD(AbstractGaussianMixtureFilter):
         w, m, P, active, n_drop, w_drop, n_pruned = self.reduction(w, m, P, active, self.capacity,
                                                                    self.birth_means[0], self.birth_covs[0])
         new_mixture = GMPHDMixture(w, m, P, active, mixture.step + 1, mixture.num_dropped + n_drop,
-                                   mixture.dropped_weight + w_drop)
+                                   mixture.dropped_weight + w_drop, mixture.num_unreported)
         new = CPHDState(new_mixture, pmf, state.truncated_mass + truncated, state.ok & ok)
+        new = eqx.tree_at(lambda s: s.mixture.num_unreported, new, mixture.num_unreported + self._unreported(new))
         return new, GMCPHDStepInfo(predicted_pmf, truncated, updated_mass, n_drop, w_drop, n_pruned, ok)
 
     def estimates(self, state: CPHDState) -> Estimates:
@@ -464,12 +465,19 @@ class GMCPHD(AbstractGaussianMixtureFilter):
         return Estimates(states, mask, jnp.where(mask, jnp.arange(self.max_estimates, dtype=jnp.int32), -1))
 
     def capacity_events(self, state: CPHDState) -> Int[Array, ""]:
-        """Components the reduction left over for want of slots, summed over the scans so far."""
-        return state.mixture.num_dropped
+        """Components the reduction left over for want of slots, plus estimates beyond the
+        ``max_estimates`` slots (not reported), summed over the scans so far."""
+        return state.mixture.num_dropped + state.mixture.num_unreported
+
+    def _unreported(self, state: CPHDState) -> Int[Array, ""]:
+        """Targets of the MAP cardinality (at most the active components) beyond ``max_estimates``."""
+        n = jnp.minimum(state.map_cardinality, jnp.sum(state.mixture.active))
+        return jnp.maximum(n - self.max_estimates, 0).astype(jnp.int32)
 
     def capacity_message(self, events: int) -> str:
-        return (f"the GM-CPHD mixture's capacity ({self.capacity} components) was too small: {events} components "
-                "were left over by the reduction; raise `capacity`")
+        return (f"the GM-CPHD's budgets were too small: {events} components left over by the reduction "
+                f"(capacity {self.capacity}) or estimates beyond max_estimates={self.max_estimates} (not "
+                "reported); raise `capacity` or `max_estimates`")
 
     def _extract(self, state: CPHDState):
         r"""Multi-target state extraction: ``n̂ = argmax_n p_k(n)`` (MAP cardinality), then the
@@ -520,7 +528,7 @@ def run_cphd(cphd: GMCPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: b
     measurements, valid = check_scans(measurements, valid, cphd.model.meas_dim)
     result = _run_cphd(cphd, measurements, valid)
     if warn:
-        warn_capacity(cphd, result.final.mixture.num_dropped)
+        warn_capacity(cphd, cphd.capacity_events(result.final))
         if is_concrete(result.truncated) and bool(result.truncated):
             warnings.warn(
                 f"the GM-CPHD's cardinality budget (max_cardinality = {cphd.max_cardinality}) was too small: "

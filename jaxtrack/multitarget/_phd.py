@@ -84,6 +84,8 @@ class GMPHDMixture(eqx.Module):
     - ``step`` ``()`` int: the index of the next scan.
     - ``num_dropped`` ``()`` int, ``dropped_weight`` ``()``: components (and their weight) that
       the reduction left over for want of slots, summed over all scans so far.
+    - ``num_unreported`` ``()`` int: estimates the extraction found beyond the filter's
+      ``max_estimates`` slots (not reported), summed over all scans so far.
     """
 
     weights: Float[Array, " J"]
@@ -93,6 +95,7 @@ class GMPHDMixture(eqx.Module):
     step: Int[Array, ""]
     num_dropped: Int[Array, ""]
     dropped_weight: Float[Array, ""]
+    num_unreported: Int[Array, ""]
 
     @property
     def cardinality(self) -> Float[Array, ""]:
@@ -221,6 +224,7 @@ def _empty_mixture(f) -> GMPHDMixture:
         step=jnp.zeros((), jnp.int32),
         num_dropped=jnp.zeros((), jnp.int32),
         dropped_weight=jnp.zeros((), dtype),
+        num_unreported=jnp.zeros((), jnp.int32),
     )
 
 
@@ -495,7 +499,8 @@ class GMPHD(AbstractGaussianMixtureFilter):
         updated_card = jnp.sum(jnp.where(active, w, 0.0))
         w, m, P, active, n_drop, w_drop, n_pruned = self.reduce(w, m, P, active)
         new = GMPHDMixture(w, m, P, active, mixture.step + 1, mixture.num_dropped + n_drop,
-                           mixture.dropped_weight + w_drop)
+                           mixture.dropped_weight + w_drop, mixture.num_unreported)
+        new = eqx.tree_at(lambda s: s.num_unreported, new, mixture.num_unreported + self._unreported(new))
         ok = scan_ok(measurements, valid) & _mixture_finite(new)
         return new, GMPHDStepInfo(updated_card, log_norm, n_drop, w_drop, n_pruned, ok)
 
@@ -512,12 +517,18 @@ class GMPHD(AbstractGaussianMixtureFilter):
         return Estimates(states, mask, jnp.where(mask, jnp.arange(self.max_estimates, dtype=jnp.int32), -1))
 
     def capacity_events(self, mixture: GMPHDMixture) -> Int[Array, ""]:
-        """Components the reduction left over for want of slots, summed over the scans so far."""
-        return mixture.num_dropped
+        """Components the reduction left over for want of slots, plus estimates beyond the
+        ``max_estimates`` slots (not reported), summed over the scans so far."""
+        return mixture.num_dropped + mixture.num_unreported
 
     def capacity_message(self, events: int) -> str:
-        return (f"the GM-PHD mixture's capacity ({self.capacity} components) was too small: {events} components "
-                "were left over by the reduction; raise `capacity`")
+        return (f"the GM-PHD's budgets were too small: {events} components left over by the reduction "
+                f"(capacity {self.capacity}) or estimates beyond max_estimates={self.max_estimates} (not "
+                "reported); raise `capacity` or `max_estimates`")
+
+    def _unreported(self, mixture: GMPHDMixture) -> Int[Array, ""]:
+        """Estimates of Table III beyond the ``max_estimates`` slots."""
+        return jnp.maximum(self._extract(mixture)[2] - self.max_estimates, 0).astype(jnp.int32)
 
     def _extract(self, mixture: GMPHDMixture):
         """Table III: ``(states (E, n), mask (E,), count ())``, ``count`` the number of estimates
@@ -592,7 +603,7 @@ def run_phd(phd: GMPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: bool
     - ``measurements``: ``(T, M, m)`` padded scans in the sensor's units (padding may be NaN);
       ``valid``: boolean ``(T, M)``, False for padding (a scenario's ``trajectory.scans``).
     - ``warn``: warn (:class:`CapacityWarning`) on the host when the reduction left components
-      over for want of slots (concrete results only).
+      over for want of slots or estimates did not fit ``max_estimates`` (concrete results only).
 
     **Returns:** a :class:`PHDResult`.
 
@@ -603,6 +614,6 @@ def run_phd(phd: GMPHD, measurements: ArrayLike, valid: ArrayLike, *, warn: bool
     measurements, valid = check_scans(measurements, valid, phd.model.meas_dim)
     result = _run_phd(phd, measurements, valid)
     if warn:
-        warn_capacity(phd, result.final.num_dropped)
+        warn_capacity(phd, phd.capacity_events(result.final))
         warn_not_ok(phd, result.ok)
     return result
