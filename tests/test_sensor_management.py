@@ -59,12 +59,17 @@ def exhaustive(which):
 
 
 @functools.cache
-def designs(which):
+def relaxed(which):
     sc, problem = {"small": small, "two": two_sensors}[which]()
     with warnings.catch_warnings():
         warnings.simplefilter("error", NotConvergedWarning)
-        relaxed = relaxed_sensor_schedule(problem)
-    return relaxed, greedy_sensor_schedule(problem)
+        return relaxed_sensor_schedule(problem)
+
+
+@functools.cache
+def greedy(which):
+    sc, problem = {"small": small, "two": two_sensors}[which]()
+    return greedy_sensor_schedule(problem)
 
 
 def test_schedule_cost_equals_numpy_recursion_and_kalman_filter():
@@ -107,37 +112,37 @@ def test_relaxed_cost_is_the_information_form_with_fractional_looks():
 @pytest.mark.parametrize("which", ["small", "two"])
 def test_gradient_design_finds_the_exhaustive_optimum_and_beats_greedy(which):
     best_schedule, best_cost, costs = exhaustive(which)
-    relaxed, (greedy, greedy_cost) = designs(which)
+    design, (greedy_schedule, greedy_cost) = relaxed(which), greedy(which)
     _, problem = {"small": small, "two": two_sensors}[which]()
-    np.testing.assert_allclose(relaxed.cost, numpy_costs(problem, relaxed.schedule[None])[0], rtol=1e-12)
-    np.testing.assert_allclose(greedy_cost, numpy_costs(problem, greedy[None])[0], rtol=1e-12)
-    assert relaxed.cost <= greedy_cost * (1 + 1e-12)
-    assert relaxed.cost <= relaxed.rounded_cost * (1 + 1e-12)
-    np.testing.assert_allclose(relaxed.cost, best_cost, rtol=1e-12)
-    # The scenario is one where looking ahead pays: greedy is not optimal.
-    assert greedy_cost > best_cost * (1 + 1e-6)
-    assert np.all(np.abs(relaxed.weights.max(axis=-1) - 1) < 0.1)  # the relaxation settled
+    np.testing.assert_allclose(design.cost, numpy_costs(problem, design.schedule[None])[0], rtol=1e-12)
+    np.testing.assert_allclose(greedy_cost, numpy_costs(problem, greedy_schedule[None])[0], rtol=1e-12)
+    assert design.cost <= greedy_cost * (1 + 1e-12)
+    assert design.cost <= design.rounded_cost * (1 + 1e-12)
+    np.testing.assert_allclose(design.cost, best_cost, rtol=1e-12)
+    # The scenarios are ones where looking ahead pays: greedy is not optimal.
+    assert greedy_cost > best_cost * (1 + 1e-3)
+    assert np.all(np.abs(design.weights.max(axis=-1) - 1) < 0.1)  # the relaxation settled
 
 
 @pytest.mark.parametrize("which", ["small", "two"])
 def test_greedy_equals_stonesoup_brute_force_manager(which):
     pytest.importorskip("stonesoup")
     sc, problem = {"small": small, "two": two_sensors}[which]()
-    _, (greedy, _) = designs(which)
-    np.testing.assert_array_equal(greedy.reshape(sc.num_scans, -1), stonesoup_schedule(sc))
+    schedule, _ = greedy(which)
+    np.testing.assert_array_equal(schedule.reshape(sc.num_scans, -1), stonesoup_schedule(sc))
 
 
 def test_greedy_is_the_per_scan_brute_force():
     """Independent of Stone Soup: at every scan, the greedy look is the best one-scan extension of
     its own prefix among all N looks (NumPy costs of the prefix schedules)."""
     sc, problem = small()
-    _, (greedy, _) = designs("small")
+    schedule, _ = greedy("small")
     for k in range(T_SMALL):
-        trials = np.repeat(greedy[None], sc.num_targets, axis=0)
+        trials = np.repeat(schedule[None], sc.num_targets, axis=0)
         trials[:, k] = np.arange(sc.num_targets)
         prefix = SensorSchedulingProblem(sc.models(), k + 1)
         costs = numpy_costs(prefix, trials[:, : k + 1, None])
-        assert greedy[k] == int(np.argmin(costs))
+        assert schedule[k] == int(np.argmin(costs))
 
 
 def _central_difference(f, x, direction, h):
@@ -174,7 +179,7 @@ def test_schedule_cost_is_differentiable_in_the_noise():
     """``∂J/∂σ²`` of a fixed discrete schedule: positive (more noise, more error) and equal to
     finite differences; the gradient design's cost moves with R as the filter says."""
     sc, problem = small()
-    schedule = designs("small")[0].schedule
+    schedule = relaxed("small").schedule
 
     def of_scale(a):
         return schedule_cost(eqx.tree_at(lambda p: p.measurement_noise_cov, problem, a * problem.measurement_noise_cov),
