@@ -578,9 +578,9 @@ def relaxed_sensor_schedule(
     the exchange search does much of the work (``rounded_cost`` against ``cost`` shows how much).
     Nothing guarantees a cost below :func:`greedy_sensor_schedule`'s. Measured (defaults,
     ``tests/_sensor_management_cases.py`` scenarios): with one sensor, 3 targets and 7 scans the
-    exhaustive optimum in 8 of 8 scenarios (greedy in 4); with two sensors, 3 targets and 4 scans
-    the optimum in 1 of 3, within 0.6 % in the others, once 0.6 % above a greedy schedule that was
-    optimal; on 5 targets × 40 scans 0.5 % below greedy
+    exhaustive optimum in 8 of 8 scenarios (greedy in 5); with two sensors, 3 targets and 4 scans
+    the optimum in 1 of 3, within 0.63 % in the others, once 0.63 % above a greedy schedule that
+    was optimal; on 5 targets × 40 scans 0.5 % below greedy
     (``benchmarks/measured/sensor_management.txt``).
 
     **Arguments:**
