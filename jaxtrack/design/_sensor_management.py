@@ -38,18 +38,17 @@ At a one-hot ``w`` this is the Kalman filter's covariance recursion exactly.
   relaxed look weights (one ``lax.scan`` each; differentiable in every array of the problem).
 - :func:`greedy_sensor_schedule` — the myopic brute-force manager: at each scan, the joint look
   of all sensors that minimises the cost after that scan (what Stone Soup's
-  ``BruteForceSensorManager`` does with an uncertainty-reduction reward).
+  ``BruteForceSensorManager`` does with a reward equal to the fall in that cost; its stock
+  ``UncertaintyRewardFunction`` rewards the fall in the Frobenius norm of the whole covariance
+  instead, a different criterion).
 - :func:`relaxed_sensor_schedule` — the non-myopic design: softmax look weights over the whole
   horizon, optimised by Adam with an entropy term annealed toward one-hot looks, rounded, then
   polished by a local search (one look reassigned, or two exchanged) on the exact discrete cost.
 
-??? cite "References"
+??? cite "Reference"
 
     Meier, L., Peschon, J. & Dressler, R. M. (1967). Optimal control of measurement subsystems.
     *IEEE Transactions on Automatic Control*, 12(5), 528–536.
-
-    Kreucher, C., Kastella, K. & Hero, A. O. (2005). Sensor management using an active sensing
-    approach. *Signal Processing*, 85(3), 607–624.
 """
 
 from __future__ import annotations
@@ -392,7 +391,8 @@ def greedy_sensor_schedule(problem: SensorSchedulingProblem) -> tuple[np.ndarray
     first in ``itertools.product`` order among equals). The targets not looked at are predicted
     alike under every look, so this is the look of largest uncertainty reduction
     ``Σ_i c_i tr(L(P_{k/k-1} − P_{k/k}))``: Stone Soup's ``BruteForceSensorManager`` with such
-    a reward. It ignores what a look does to later scans. One jitted ``lax.scan``.
+    a reward (not its stock ``UncertaintyRewardFunction``, which uses the Frobenius norm of the
+    whole covariance). It ignores what a look does to later scans. One jitted ``lax.scan``.
 
     **Arguments:** ``problem``: the :class:`SensorSchedulingProblem`.
 
