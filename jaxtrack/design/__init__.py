@@ -2,7 +2,8 @@
 optax (:mod:`._schedules`); per-step periods, real-time rate allocation and maneuver compensation
 (:mod:`._rates`); designs by gradient on a differentiable Monte Carlo objective next to the same design
 on the actual covariance (:mod:`._mc_design`); bearings-only observer trajectories designed by gradient
-on the posterior Cramér–Rao bound (:mod:`._observer`)."""
+on the posterior Cramér–Rao bound (:mod:`._observer`); multi-target sensor schedules designed by
+gradient next to the myopic brute-force manager (:mod:`._sensor_management`)."""
 
 from ._mc_design import (
     GradientDesign as GradientDesign,
@@ -22,6 +23,14 @@ from ._rates import (
     allocate_rates as allocate_rates,
     maneuver_period_change as maneuver_period_change,
     per_step_design as per_step_design,
+)
+from ._sensor_management import (
+    SensorScheduleDesign as SensorScheduleDesign,
+    SensorSchedulingProblem as SensorSchedulingProblem,
+    greedy_sensor_schedule as greedy_sensor_schedule,
+    relaxed_schedule_cost as relaxed_schedule_cost,
+    relaxed_sensor_schedule as relaxed_sensor_schedule,
+    schedule_cost as schedule_cost,
 )
 from ._schedules import (
     NewtonResult as NewtonResult,
@@ -62,4 +71,10 @@ __all__ = [
     "constrained_turn_rates",
     "design_observer_path",
     "observer_states",
+    "SensorScheduleDesign",
+    "SensorSchedulingProblem",
+    "greedy_sensor_schedule",
+    "relaxed_schedule_cost",
+    "relaxed_sensor_schedule",
+    "schedule_cost",
 ]
