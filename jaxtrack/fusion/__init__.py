@@ -16,13 +16,7 @@ arrays and a strategy object (an :class:`AbstractFusionRule`) with one ``fuse`` 
 """
 
 from ._rules import (
-    AbstractFusionRule as AbstractFusionRule,
-    BarShalomCampo as BarShalomCampo,
-    CovarianceIntersection as CovarianceIntersection,
-    EllipsoidalIntersection as EllipsoidalIntersection,
     FusedEstimate as FusedEstimate,
-    IndependentFusion as IndependentFusion,
-    SplitCovarianceIntersection as SplitCovarianceIntersection,
     bar_shalom_campo as bar_shalom_campo,
     covariance_intersection as covariance_intersection,
     ellipsoidal_intersection as ellipsoidal_intersection,
@@ -30,6 +24,14 @@ from ._rules import (
     optimal_ci_weight as optimal_ci_weight,
     optimal_sci_weight as optimal_sci_weight,
     split_covariance_intersection as split_covariance_intersection,
+)
+from ._strategies import (
+    AbstractFusionRule as AbstractFusionRule,
+    BarShalomCampo as BarShalomCampo,
+    CovarianceIntersection as CovarianceIntersection,
+    EllipsoidalIntersection as EllipsoidalIntersection,
+    IndependentFusion as IndependentFusion,
+    SplitCovarianceIntersection as SplitCovarianceIntersection,
 )
 from ._track import (
     TrackFusionResult as TrackFusionResult,

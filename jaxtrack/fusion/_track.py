@@ -22,7 +22,7 @@ from ..filters._base import FirstStep
 from ..filters._kalman import KalmanFilter
 from ..filters._updates import symmetrize
 from ..models import LinearGaussianModel
-from ._rules import AbstractFusionRule
+from ._strategies import AbstractFusionRule
 
 
 def cross_covariance_step(
