@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -44,6 +45,28 @@ def is_concrete(x) -> bool:
     **Returns:** a Python bool.
     """
     return not isinstance(x, jax.core.Tracer)
+
+
+def throw_unless_ok(result, ok, message: str):
+    """``result``, or a run-time error with ``message`` when ``ok`` is not all True.
+
+    The ``throw=True`` of the entry points. Called on the result of a jitted function, OUTSIDE
+    it: when ``ok`` is concrete (an eager call) it is read here and
+    ``equinox.EquinoxRuntimeError(message)`` raised (the error type the users of ``throw`` have
+    always met); when it is traced (the entry point runs inside the caller's
+    ``jit``/``vmap``/``grad``) an ``equinox.error_if`` is attached in the caller's trace. Either
+    way the jitted function itself holds no host callback, so JAX's persistent compilation cache
+    can store it (JAX refuses to write a program with a host callback: the CLI's second run and
+    every test process would compile it again).
+
+    **Arguments:** ``result``: any pytree; ``ok``: a boolean array (all True = no error);
+    ``message``: the error's text. **Returns:** ``result``.
+    """
+    if is_concrete(ok):
+        if not bool(np.all(np.asarray(ok))):
+            raise eqx.EquinoxRuntimeError(message)
+        return result
+    return eqx.error_if(result, ~jnp.all(ok), message)
 
 
 def nan_where_traced(x, bad):

@@ -258,6 +258,22 @@ if _PROFILE_DIR:
 
     jax.monitoring.register_event_duration_secs_listener(_listen)
 
+    # Programs JAX compiles but will not write to the persistent cache because they hold a host
+    # callback (an `equinox.error_if`, a `jax.debug` call): every process, and every test after
+    # `jax.clear_caches()`, compiles them again. Recorded per test in FOLDER/<pid>.uncached.tsv
+    # (test, program name, its compile seconds); tools/suite_profile.py sums them by program.
+    from jax._src import compiler as _compiler
+
+    _cache_write = _compiler._cache_write
+    _uncached: list = []
+
+    def _recording_cache_write(cache_key, compile_time_secs, module_name, backend, executable, host_callbacks):
+        if host_callbacks:
+            _uncached.append((module_name, compile_time_secs))
+        return _cache_write(cache_key, compile_time_secs, module_name, backend, executable, host_callbacks)
+
+    _compiler._cache_write = _recording_cache_write
+
     def _rss_mb() -> float:
         with open("/proc/self/statm", encoding="ascii") as f:  # Linux: resident pages, 2nd field
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
@@ -271,3 +287,7 @@ if _PROFILE_DIR:
         with open(Path(_PROFILE_DIR) / f"{os.getpid()}.tsv", "a", encoding="utf-8") as f:
             f.write(f"{item.nodeid}\t{wall:.3f}\t{_totals['compile'] - before['compile']:.3f}"
                     f"\t{_totals['trace'] - before['trace']:.3f}\t{_rss_mb():.0f}\n")
+        if _uncached:
+            with open(Path(_PROFILE_DIR) / f"{os.getpid()}.uncached.tsv", "a", encoding="utf-8") as f:
+                f.writelines(f"{item.nodeid}\t{name}\t{secs:.3f}\n" for name, secs in _uncached)
+            _uncached.clear()

@@ -376,6 +376,10 @@ def test_guard_delivers_a_discarded_interrupt_again(sigint_raises):
             if gc_callback in gc.callbacks:
                 gc.callbacks.remove(gc_callback)
         print(f"{where}: delivered again after {latency:.3f} s")
-        assert (guard.deferred, guard.delivered, ended) == (1, 1, []), where
+        # Each put-off interrupt is delivered again. A re-delivery may itself land where Python puts
+        # it off (another gc pass runs during it) and is then put off and delivered once more: the
+        # counts match and stay small, and exactly one KeyboardInterrupt reached this frame.
+        assert guard.deferred == guard.delivered and 1 <= guard.delivered <= 3 and ended == [], (
+            where, guard.deferred, guard.delivered, ended)
         assert latency < 5 and gc.isenabled()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -21,7 +21,7 @@ from pathlib import Path
 def read(folder) -> list[tuple]:
     """``[(nodeid, wall, compile, trace, rss_mb, pid), ...]`` of every test in ``folder``."""
     rows = []
-    for f in sorted(Path(folder).glob("*.tsv")):
+    for f in sorted(Path(folder).glob("[0-9]*[0-9].tsv")):
         for line in f.read_text(encoding="utf-8").splitlines():
             nodeid, wall, comp, trace, rss = line.split("\t")
             rows.append((nodeid, float(wall), float(comp), float(trace), float(rss), f.stem))
@@ -51,6 +51,20 @@ def main(argv=None) -> None:
     print(f"{'module':55s} {'wall s':>8s} {'compile':>8s} {'trace':>8s} {'tests':>6s}")
     for name, (wall, comp, trace, n) in sorted(by_module.items(), key=lambda kv: -kv[1][0]):
         print(f"{name:55s} {wall:8.1f} {comp:8.1f} {trace:8.1f} {n:6d}")
+    uncached = collections.defaultdict(lambda: [0.0, 0, set()])
+    for f in sorted(Path(args.folder).glob("*.uncached.tsv")):
+        for line in f.read_text(encoding="utf-8").splitlines():
+            nodeid, name, secs = line.split("\t")
+            u = uncached[name]
+            u[0] += float(secs)
+            u[1] += 1
+            u[2].add(nodeid.split("::")[0])
+    if uncached:
+        total_u = sum(u[0] for u in uncached.values())
+        print(f"\nprograms not written to the persistent cache (host callbacks): {total_u:.0f} s of XLA compile")
+        print(f"{'program':55s} {'compile':>8s} {'times':>6s}  modules")
+        for name, (secs, n, mods) in sorted(uncached.items(), key=lambda kv: -kv[1][0])[:25]:
+            print(f"{name[:55]:55s} {secs:8.1f} {n:6d}  {len(mods)}")
     if args.tests:
         print(f"\n{args.tests} slowest tests (wall, compile, trace s)")
         for nodeid, wall, comp, trace, _, _ in sorted(rows, key=lambda r: -r[1])[: args.tests]:

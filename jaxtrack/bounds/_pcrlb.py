@@ -70,6 +70,8 @@ from ..filters._linalg import cholesky, cholesky_and_inverse, matmul
 from ..models import AbstractStateSpaceModel
 from ..montecarlo._result import MonteCarloResult
 from ..montecarlo._simulate import (
+    _check_model_values,
+    _guard_traced_model,
     _resolve_num_steps,
     _simulate_jit,
     check_detection_probability,
@@ -364,6 +366,7 @@ def pcrlb(
     """
     key = as_key(key)
     _check_common(model, first_step)
+    _check_model_values(model)  # the prior the runs are drawn from (concrete values; traced: below)
     T = _resolve_num_steps(model, num_steps)
     if not isinstance(num_runs, (int, np.integer)) or isinstance(num_runs, bool) or num_runs < 1:
         raise InputError(f"`num_runs` must be a positive int; got {num_runs!r}.")
@@ -389,7 +392,7 @@ def pcrlb(
     _check_null_space(model, max_null, Cs, first_step)
     J, B = _finish(model, T, first_step, jnp.asarray(num_runs, dtype), weights, Cs, Qpinv, sum_F, sum_spread,
                    sum_info)
-    return PosteriorCRB(information=J, bound=B, num_runs=int(num_runs))
+    return _guard_traced_model(model, PosteriorCRB(information=J, bound=B, num_runs=int(num_runs)))
 
 
 def _check_null_space(model, max_null, Cs, first_step) -> None:

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from .._validation import InputError, check_shape, is_concrete
+from .._validation import InputError, check_shape, is_concrete, throw_unless_ok
 from ..models import AbstractStateSpaceModel
 from ._base import (
     AbstractFilter,
@@ -383,7 +383,7 @@ def _mean_pass(filter, model, cov: SharedCovariances, z, observed, first_step, s
 
 
 @eqx.filter_jit
-def _run_shared(filter, model, z, observed, first_step, save, throw):
+def _run_shared(filter, model, z, observed, first_step, save):
     cov = shared_covariances(filter, model, observed, first_step)
     x, ll, ok, hist = _mean_pass(filter, model, cov, z, observed, first_step, save)
     ok = ok & cov.ok
@@ -403,7 +403,7 @@ def _run_shared(filter, model, z, observed, first_step, save, throw):
         ok=ok,
         shared_covariance=True,
     )
-    return _maybe_throw(result, throw)
+    return result
 
 
 def map_blocks(fn, args, block: int):
@@ -436,7 +436,7 @@ def map_blocks(fn, args, block: int):
 
 
 @eqx.filter_jit
-def _run_per_run(filter, model, z, observed, first_step, save, throw):
+def _run_per_run(filter, model, z, observed, first_step, save):
     per_run_mask = observed.ndim == 3
     z = _zero_missing(z, observed)
 
@@ -458,15 +458,16 @@ def _run_per_run(filter, model, z, observed, first_step, save, throw):
         res.innovation, res.innovation_cov, res.num_observed, res.log_likelihood,
         res.final_mean, res.final_cov, res.ok, shared_covariance=False,
     )
-    return _maybe_throw(result, throw)
+    return result
 
 
 def _maybe_throw(result, throw):
+    # Outside the jitted batch (no host callback in it: the persistent compilation cache keeps it).
     if not throw:
         return result
-    return eqx.error_if(
+    return throw_unless_ok(
         result,
-        ~jnp.all(result.ok),
+        result.ok,
         "jaxtrack: at least one run of the batch produced a non-finite mean, covariance or "
         "log-likelihood. Likely causes: (a) a measurement is NaN/inf (pass nan_as_missing=True "
         "to skip them); (b) R or the prior covariance is not positive definite; (c) units "
@@ -511,7 +512,7 @@ class SharedCovariance(AbstractCovarianceStrategy):
         return bool(mask_is_shared and filter.covariance_is_data_free(model))
 
     def run_batch(self, filter, model, z, observed, first_step, save, throw):
-        return _run_shared(filter, model, z, observed, first_step, save, throw)
+        return _maybe_throw(_run_shared(filter, model, z, observed, first_step, save), throw)
 
 
 class PerRunCovariance(AbstractCovarianceStrategy):
@@ -526,7 +527,7 @@ class PerRunCovariance(AbstractCovarianceStrategy):
         return True
 
     def run_batch(self, filter, model, z, observed, first_step, save, throw):
-        return _run_per_run(filter, model, z, observed, first_step, save, throw)
+        return _maybe_throw(_run_per_run(filter, model, z, observed, first_step, save), throw)
 
 
 class AutoCovariance(eqx.Module):

@@ -58,7 +58,13 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._deprecation import renamed
 from .._export import Exportable
-from .._validation import InputError, check_finite, check_shape, is_concrete
+from .._validation import (
+    InputError,
+    check_finite,
+    check_shape,
+    is_concrete,
+    throw_unless_ok,
+)
 from ..models import AbstractStateSpaceModel
 from ..models._layout import common_layout
 from ._base import AbstractFilter, FirstStep, _outer_factor, prepare_measurements
@@ -496,7 +502,7 @@ class IMMResult(Exportable, eqx.Module):
 
 
 @eqx.filter_jit
-def _run_imm_jit(imm, z, observed, first_step, throw):
+def _run_imm_jit(imm, z, observed, first_step):
     def body(state, inputs):
         zk, ok = inputs
         state, out = imm.step(state, zk, ok, first_step=first_step)
@@ -510,15 +516,17 @@ def _run_imm_jit(imm, z, observed, first_step, throw):
         out.filtered_mean, out.filtered_cov, out.mode_probs, means, covs, out.member_log_likelihoods,
         final.log_likelihood, final.ok,
     )
-    if throw:
-        result = eqx.error_if(
-            result, ~result.ok,
-            "jaxtrack: the IMM produced a non-finite mean, covariance, mode probability or "
-            "log-likelihood, or its `transition_probs` / `initial_probs` (built under jit, vmap or "
-            "grad, so not checked by the constructor) are not stochastic: entries >= 0, rows "
-            "summing to 1. Pass throw=False to get the result with ok=False instead.",
-        )
+    # `throw` is applied by run_imm, outside this program (no host callback in it: the persistent
+    # compilation cache keeps it).
     return result
+
+
+_IMM_FAILED = (
+    "jaxtrack: the IMM produced a non-finite mean, covariance, mode probability or "
+    "log-likelihood, or its `transition_probs` / `initial_probs` (built under jit, vmap or "
+    "grad, so not checked by the constructor) are not stochastic: entries >= 0, rows "
+    "summing to 1. Pass throw=False to get the result with ok=False instead."
+)
 
 
 def run_imm(
@@ -554,4 +562,5 @@ def run_imm(
     z = observed = None
     for model in imm.models:
         z, observed = prepare_measurements(model, measurements, mask, nan_as_missing)
-    return _run_imm_jit(imm, z, observed, first_step, throw)
+    result = _run_imm_jit(imm, z, observed, first_step)
+    return throw_unless_ok(result, result.ok, _IMM_FAILED) if throw else result

@@ -65,7 +65,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from .._validation import InputError
+from .._validation import InputError, throw_unless_ok
 from ._base import FirstStep
 from ._imm import (
     IMMResult, InteractingMultipleModel, _covariance, _moment_match, _native_cov, _project, _project_columns, run_imm,
@@ -171,7 +171,7 @@ def _backward_step(
 
 
 @eqx.filter_jit
-def _imm_backward(imm: InteractingMultipleModel, filtered: IMMResult, throw: bool) -> IMMSmootherResult:
+def _imm_backward(imm: InteractingMultipleModel, filtered: IMMResult) -> IMMSmootherResult:
     T = filtered.filtered_mean.shape[0]
 
     def body(carry, inputs):
@@ -202,7 +202,7 @@ def _imm_backward(imm: InteractingMultipleModel, filtered: IMMResult, throw: boo
         filtered,
         filtered.ok,
     )
-    return _with_status(result, throw)
+    return _with_status(result, False)  # `throw` is applied outside the jitted pass (imm_smoother)
 
 
 def _with_status(result: IMMSmootherResult, throw: bool) -> IMMSmootherResult:
@@ -212,9 +212,7 @@ def _with_status(result: IMMSmootherResult, throw: bool) -> IMMSmootherResult:
         & jnp.all(jnp.isfinite(result.smoothed_mode_probs))
     )
     result = eqx.tree_at(lambda r: r.ok, result, result.filtered.ok & finite)
-    if throw:
-        result = eqx.error_if(result, ~result.ok, _IMM_SMOOTHER_FAILED)
-    return result
+    return throw_unless_ok(result, result.ok, _IMM_SMOOTHER_FAILED) if throw else result
 
 
 def imm_smoother(
@@ -258,4 +256,4 @@ def imm_smoother(
             filtered, filtered.ok,
         )
         return _with_status(res, throw)
-    return _imm_backward(imm, filtered, throw)
+    return _with_status(_imm_backward(imm, filtered), throw)

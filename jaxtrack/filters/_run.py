@@ -11,14 +11,14 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike
 
-from .._validation import covariance_ok, is_concrete
+from .._validation import covariance_ok, is_concrete, throw_unless_ok
 from ..models import AbstractStateSpaceModel
 from ._base import AbstractFilter, FilterResult, FirstStep, Save, check_run_arguments, prepare_measurements
 from ._parallel import AbstractTimeScan, AutoScan, Sequential, resolve_scan
 
 
 @eqx.filter_jit
-def _run_filter_jit(filter, model, measurements, observed, first_step, save, throw, check_noise, scan=Sequential()):
+def _run_filter_jit(filter, model, measurements, observed, first_step, save, check_noise, scan=Sequential()):
     # `scan` is resolved (Sequential or ParallelInTime); Sequential's pass is `_scan_filter`.
     result = scan.filter_pass(filter, model, measurements, observed, first_step, save)
     # An indefinite or non-finite prior can run to a finite, meaningless result. The model's
@@ -32,10 +32,9 @@ def _run_filter_jit(filter, model, measurements, observed, first_step, save, thr
         # negative definite, or a non-symmetric R) were not seen by the constructor. One batched
         # eigvalsh over the stored Q and R, outside the scan; skipped for concrete models.
         ok = ok & _noise_ok(model)
-    result = eqx.tree_at(lambda r: r.ok, result, result.ok & ok)
-    if throw:
-        result = eqx.error_if(result, ~result.ok, _FILTER_FAILED)
-    return result
+    # `throw` is applied by the caller, outside this program (`throw_unless_ok`): no host callback
+    # in it, so the persistent compilation cache keeps it.
+    return eqx.tree_at(lambda r: r.ok, result, result.ok & ok)
 
 
 _FILTER_FAILED = (
@@ -129,4 +128,5 @@ def run_filter(
     check_run_arguments(filter, model, first_step, save)
     z, observed = prepare_measurements(model, measurements, mask, nan_as_missing)
     scan = resolve_scan(scan, filter, model, z.shape[0])
-    return _run_filter_jit(filter, model, z, observed, first_step, save, throw, _model_is_traced(model), scan)
+    result = _run_filter_jit(filter, model, z, observed, first_step, save, _model_is_traced(model), scan)
+    return throw_unless_ok(result, result.ok, _FILTER_FAILED) if throw else result

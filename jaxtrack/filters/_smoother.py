@@ -9,6 +9,7 @@ import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._export import Exportable
+from .._validation import throw_unless_ok
 from ..models import AbstractStateSpaceModel
 from ._base import AbstractFilter, FilterResult, FirstStep, symmetrize
 from ._kalman import KalmanFilter
@@ -123,19 +124,17 @@ def _rts_scan(model, filtered: FilterResult) -> tuple[Array, Array, Array]:
 
 
 @eqx.filter_jit
-def _rts_backward(model, filtered: FilterResult, throw: bool, scan: AbstractTimeScan = Sequential()):
+def _rts_backward(model, filtered: FilterResult, scan: AbstractTimeScan = Sequential()):
     # `scan` is resolved (Sequential or ParallelInTime); Sequential's pass is `_rts_scan`.
     means, covs, gains = scan.smoother_pass(model, filtered)
-    return _with_status(SmootherResult(means, covs, gains, filtered, filtered.ok), throw)
+    return _with_status(SmootherResult(means, covs, gains, filtered, filtered.ok))
 
 
-def _with_status(result: SmootherResult, throw: bool) -> SmootherResult:
-    """Set ``ok`` from the smoothed moments; with ``throw`` raise at run time if it is False."""
+def _with_status(result: SmootherResult) -> SmootherResult:
+    """Set ``ok`` from the smoothed moments (``throw`` is the caller's, outside the jitted pass:
+    no host callback in it, so the persistent compilation cache keeps it)."""
     finite = jnp.all(jnp.isfinite(result.smoothed_mean)) & jnp.all(jnp.isfinite(result.smoothed_cov))
-    result = eqx.tree_at(lambda r: r.ok, result, result.filtered.ok & finite)
-    if throw:
-        result = eqx.error_if(result, ~result.ok, _SMOOTHER_FAILED)
-    return result
+    return eqx.tree_at(lambda r: r.ok, result, result.filtered.ok & finite)
 
 
 def rts_smoother(
@@ -191,7 +190,8 @@ def rts_smoother(
     if filtered.filtered_mean.shape[0] == 1:
         empty = jnp.zeros((0,) + filtered.filtered_cov.shape[1:], filtered.filtered_cov.dtype)
         return SmootherResult(filtered.filtered_mean, filtered.filtered_cov, empty, filtered, filtered.ok)
-    return _rts_backward(model, filtered, throw, scan)
+    result = _rts_backward(model, filtered, scan)
+    return throw_unless_ok(result, result.ok, _SMOOTHER_FAILED) if throw else result
 
 
 def lag_one_covariances(result: SmootherResult) -> Float[Array, "Tm1 n n"]:

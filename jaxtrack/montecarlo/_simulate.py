@@ -10,7 +10,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PRNGKeyArray
 
-from .._validation import InputError, as_key, check_covariance, check_finite, covariance_ok, is_concrete
+from .._validation import (
+    InputError,
+    as_key,
+    check_covariance,
+    check_finite,
+    covariance_ok,
+    is_concrete,
+    throw_unless_ok,
+)
 from ..filters._base import FirstStep
 from ..filters._linalg import matmul
 from ._noise import key_words, step_normals
@@ -278,7 +286,9 @@ def advance(model, factors: NoiseFactors, first_step: FirstStep, x_prev, eps, k)
 
 
 @eqx.filter_jit
-def _simulate_jit(model, key, num_steps, first_step, detection_probability, throw=False):
+def _simulate_jit(model, key, num_steps, first_step, detection_probability):
+    # No host callback in this program (the checks are attached by the caller, outside it: see
+    # `simulate`), so JAX's persistent compilation cache can keep it.
     factors = noise_factors(model, num_steps)
     prior_key, steps_key = step_keys(key)
     x0 = draw_initial_state(model, factors, prior_key)
@@ -301,12 +311,7 @@ def _simulate_jit(model, key, num_steps, first_step, detection_probability, thro
     else:
         detected = draw_detections(key, detection_probability, dtype)
     ok = jnp.all(jnp.isfinite(xs)) & jnp.all(jnp.isfinite(zs))
-    # The model's own checks first: a NaN prior is reported by name, not as "non-finite states"
-    # (chained error_if's fire in order).
-    out = _guard_traced_model(model, Trajectory(xs, zs, detected, ok))
-    if throw:
-        out = eqx.error_if(out, ~ok, _SIMULATE_FAILED)
-    return out
+    return Trajectory(xs, zs, detected, ok)
 
 
 def _check_model_values(model: AbstractStateSpaceModel) -> None:
@@ -330,7 +335,8 @@ def _guard_traced_model(model: AbstractStateSpaceModel, out):
 
     Under ``jit``/``vmap``/``grad`` the eager checks cannot see the values; a NaN or indefinite
     prior would give NaN (or meaningless) states silently. One ``(n, n)`` eigvalsh, outside the
-    scan.
+    scan. Called outside the jitted simulation, where ``model`` is what the caller passed: a
+    concrete (eagerly checked) model adds nothing.
     """
     if is_concrete(model.initial_mean) and is_concrete(model.initial_cov):
         checks = []
@@ -405,7 +411,11 @@ def simulate(
     if detection_probability is not None:
         detection_probability = check_detection_probability(detection_probability, num_steps)
         detection_probability = jnp.asarray(detection_probability, model.initial_mean.dtype)
-    return _simulate_jit(model, key, num_steps, first_step, detection_probability, bool(throw))
+    out = _simulate_jit(model, key, num_steps, first_step, detection_probability)
+    # The model's own checks first: a NaN prior is reported by name, not as "non-finite states"
+    # (chained error_if's fire in order).
+    out = _guard_traced_model(model, out)
+    return throw_unless_ok(out, out.ok, _SIMULATE_FAILED) if throw else out
 
 
 def _resolve_num_steps(model, num_steps) -> int:
