@@ -97,7 +97,8 @@ from ._mixture import GaussianMixture, check_mixture
 from ._phd import _scalar
 from ._scenario import _positive_int
 
-__all__ = ["GLMB", "LMB", "GLMBState", "GLMBStepInfo", "AbstractLabelledProjection", "DeltaGLMB", "LMBProjection"]
+__all__ = ["GLMB", "LMB", "AbstractLabelledFilter", "GLMBState", "GLMBStepInfo", "AbstractLabelledProjection", "DeltaGLMB",
+           "LMBProjection"]
 
 
 class GLMBState(eqx.Module):
