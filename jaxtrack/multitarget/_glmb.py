@@ -2,7 +2,7 @@ r"""The δ-generalised labelled multi-Bernoulli (δ-GLMB) filter and the labelle
 (LMB) filter with fixed budgets: one joint prediction–update step, two projection strategies.
 
 **The density.** A δ-GLMB (Vo & Vo 2013, "Labeled random finite sets and multi-object conjugate
-priors", IEEE TSP 61(13), 3460-3475, Def. 3 / eq. (14); VV13 below) is a mixture over
+priors", IEEE TSP 61(13), 3460-3475, Sec. III; VV13 below) is a mixture over
 *hypotheses* ``h`` of weight ``w_h``: a finite label set ``I_h`` and, for every label ``ℓ ∈ I_h``,
 a density ``p_h(·, ℓ)`` that depends on the label AND on its association history (every
 measurement or miss that formed it). An LMB (Reuter, Vo, Vo & Dietmayer 2014, "The labeled
@@ -24,12 +24,12 @@ label may sit in different slots in different hypotheses.
 
 **One scan: joint prediction and update** (Vo, Vo & Hoang 2017, "An efficient implementation of
 the generalized labeled multi-Bernoulli filter", IEEE TSP 65(8), 1975-1987; VVH17 below, Sec. III,
-the joint δ-GLMB recursion, eqs. (6)-(10) there as we read them: ``ω^{(I,ξ)} ∝ Σ_θ w^{(I,ξ)}
-Π_ℓ η_Z(ℓ, θ(ℓ))``). For every prior row ``h`` the ``P = N + B`` candidate tracks are its ``N``
+the joint δ-GLMB recursion: ``ω^{(I,ξ)} ∝ Σ_θ w^{(I,ξ)} Π_ℓ η_Z(ℓ, θ(ℓ))``; the section and
+proposition structure is cited, equation numbers were not checked against the published PDF). For every prior row ``h`` the ``P = N + B`` candidate tracks are its ``N``
 slots followed by the ``B`` birth components of :attr:`GLMB.birth` (an LMB birth, each with its
 own ``r_B`` and label). Each candidate ``i`` with prior existence ``r_i`` (slot: ``r``; birth:
-``r_B``) takes exactly one of three kinds of choice, with weights (VVH17 eq. (9) with
-(10)-(11); ``ψ`` is the measurement likelihood of the predicted Gaussian):
+``r_B``) takes exactly one of three kinds of choice, with weights (VVH17 Sec. III, the
+``η_i(j)`` of its joint prediction–update, for a Gaussian single-target density):
 
 .. math::
 
@@ -50,10 +50,12 @@ component is the filter's update on its measurement, a missed one keeps the pred
 Then the **projection strategy**:
 
 - :class:`DeltaGLMB`: keep the ``H`` best hypotheses, prune those of normalised weight below
-  ``hypothesis_threshold``, renormalise (VVH17 Sec. IV, "pruning"); surviving tracks keep their
-  slot, births go to the hypothesis's free slots in birth order;
-- :class:`LMBProjection`: project the (truncated) δ-GLMB posterior to an LMB (R14 Prop. 4, eqs.
-  (44)-(45)): ``r_ℓ = Σ_h w_h 1[ℓ ∈ I_h]`` and ``p_ℓ = Σ_h w_h 1[ℓ ∈ I_h] p_h(·, ℓ) / r_ℓ``,
+  ``hypothesis_threshold``; surviving tracks keep their slot, births go to the hypothesis's free
+  slots in birth order; hypotheses that became equal (same labels and the same Gaussians: they
+  differed only in the history of a track that is now absent) are merged, their weights summed,
+  as Vo & Vo's implementation does; renormalise;
+- :class:`LMBProjection`: project the (truncated) δ-GLMB posterior to an LMB (R14 Sec. III, the
+  LMB approximation that matches the first moment of the labelled posterior): ``r_ℓ = Σ_h w_h 1[ℓ ∈ I_h]`` and ``p_ℓ = Σ_h w_h 1[ℓ ∈ I_h] p_h(·, ℓ) / r_ℓ``,
   collapsed to one Gaussian by moment matching; labels with ``r ≤ existence_threshold`` are
   removed. Since an LMB prior is one row whose candidates carry ``r_ℓ``, the next scan's joint
   step is exactly R14's "LMB → δ-GLMB, update" (the subsets of labels never need to be listed:
@@ -143,7 +145,7 @@ class GLMBState(eqx.Module):
         return jnp.sum(self.weights * jnp.sum(jnp.where(self.labels >= 0, self.existence, 0.0), axis=1))
 
     def label_existence(self, labels: Int[Array, " L"]) -> Float[Array, " L"]:
-        """``P(ℓ ∈ X)`` for each of ``labels`` ``(L,)``: ``Σ_h w_h r_{h,ℓ}`` (VV13 / R14 eq. (44))."""
+        """``P(ℓ ∈ X)`` for each of ``labels`` ``(L,)``: ``Σ_h w_h r_{h,ℓ}`` (R14's projection)."""
         hit = (self.labels[None, :, :] == jnp.asarray(labels)[:, None, None]) & (self.labels >= 0)[None]
         return jnp.einsum("lrn,r,rn->l", hit.astype(self.existence.dtype), self.weights, self.existence)
 
@@ -203,6 +205,33 @@ def _scatter(post_present, post_labels, post_means, post_covs, post_r, N):
     return labels.astype(jnp.int32), r, means, covs, n_drop
 
 
+def _merge_equal(labels, means, covs, log_w, active):
+    """Hypotheses with the same labels and the same Gaussians (to 1e-9 relative: the same history
+    gives the same arithmetic) merged into the first of each group, weights summed and the rows
+    renormalised. ``labels`` ``(K, N)`` (−1 empty), ``means`` ``(K, N, n)``, ``covs``
+    ``(K, N, n, n)``. **Returns** ``(log_w (K,), active (K,))``."""
+    big = jnp.iinfo(jnp.int32).max
+    order = jnp.argsort(jnp.where(labels >= 0, labels, big), axis=1, stable=True)
+    lab = jnp.take_along_axis(labels, order, axis=1)
+    occ = lab >= 0
+    m = jnp.take_along_axis(means, order[..., None], axis=1)
+    c = jnp.take_along_axis(covs, order[..., None, None], axis=1).reshape(m.shape[:2] + (-1,))
+    x = jnp.concatenate([m, c], axis=-1)  # (K, N, n + n²)
+    close = jnp.abs(x[:, None] - x[None, :]) <= 1e-9 * (1.0 + jnp.abs(x[:, None]))  # (K, K, N, d)
+    slot_same = (lab[:, None] == lab[None, :]) & (~occ[:, None] | jnp.all(close, axis=-1))
+    same = jnp.all(slot_same, axis=-1) & active[:, None] & active[None, :]
+    K = labels.shape[0]
+    first = jnp.argmax(same, axis=1)  # the first equal row (itself when none earlier)
+    rep = active & (first == jnp.arange(K))
+    top = jnp.max(jnp.where(active, log_w, -jnp.inf))
+    top = jnp.where(jnp.isfinite(top), top, 0.0)
+    summed = jax.ops.segment_sum(jnp.where(active, jnp.exp(log_w - top), 0.0), first, num_segments=K)
+    total = jnp.sum(jnp.where(rep, summed, 0.0))
+    safe = jnp.where(rep & (summed > 0.0), summed, 1.0)
+    new = jnp.where(rep, jnp.log(safe) - jnp.log(jnp.where(total > 0.0, total, 1.0)), -jnp.inf)
+    return new, rep
+
+
 class AbstractLabelledProjection(eqx.Module):
     """What a labelled filter keeps of the ranked δ-GLMB posterior: :class:`DeltaGLMB` (the
     δ-GLMB filter: the hypotheses themselves) or :class:`LMBProjection` (the LMB filter: the
@@ -225,7 +254,8 @@ class AbstractLabelledProjection(eqx.Module):
 
 class DeltaGLMB(AbstractLabelledProjection):
     """The δ-GLMB filter's projection: none — the ``H`` best hypotheses, pruned below
-    ``hypothesis_threshold`` (normalised weight) and renormalised (VVH17 Sec. IV).
+    ``hypothesis_threshold`` (normalised weight), equal ones merged (same labels and Gaussians:
+    they differed only in an absent track's history), renormalised (VVH17 Sec. IV).
 
     Estimates (Vo & Vo's estimator, VVP14 Sec. IV-C / VVH17 Sec. IV-D): the MAP cardinality
     ``n* = argmax_n Σ_h w_h 1[|I_h| = n]``, then the heaviest hypothesis with ``|I_h| = n*``: its
@@ -241,7 +271,10 @@ class DeltaGLMB(AbstractLabelledProjection):
             post.present, post.labels, post.means, post.covs, r)
         ex = jnp.where(post.active[:, None], ex, 0.0)
         labels = jnp.where(post.active[:, None] & (ex > 0.0), labels, -1)
-        return labels, ex, means, covs, post.log_w, post.active, jnp.sum(jnp.where(post.active, n_drop, 0))
+        log_w, active = _merge_equal(labels, means, covs, post.log_w, post.active)
+        labels = jnp.where(active[:, None], labels, -1)
+        ex = jnp.where(active[:, None], ex, 0.0)
+        return labels, ex, means, covs, log_w, active, jnp.sum(jnp.where(post.active, n_drop, 0))
 
     def estimates(self, f, state: GLMBState) -> Estimates:
         N = f.max_tracks
@@ -257,7 +290,7 @@ class DeltaGLMB(AbstractLabelledProjection):
 
 
 class LMBProjection(AbstractLabelledProjection):
-    """The LMB filter's projection (R14 Prop. 4, eqs. (44)-(45)): every candidate track's
+    """The LMB filter's projection (R14 Sec. III): every candidate track's
     existence ``r = Σ_h w_h 1[present]`` over the ranked hypotheses and its density, the weighted
     mixture of its components, moment-matched to one Gaussian; tracks with ``r <=``
     ``existence_threshold`` are removed, births take the free slots.
