@@ -1,0 +1,98 @@
+"""δ-GLMB and LMB on Vo & Vo's linear benchmark: one run, and a vmapped batch of runs.
+
+The scenario is :func:`jaxtrack.multitarget.vo_vo_linear` (100 scans, 12 noise-free tracks, at
+most 10 at once, ``P_D = 0.98``, ``Poisson(66)`` clutter over ``[−1000, 1000]²`` m, LMB birth of
+four labels with ``r_B = 0.03``), run ``i`` drawn from ``jax.random.fold_in(key, i)``. The filters:
+``GLMB`` and ``LMB`` with a Kalman filter, the settings of :class:`VoVoLinearSettings`, a
+Mahalanobis gate of ``--gate`` (default 4), ``--tracks`` slots, ``--hypotheses`` ranked
+hypotheses and ``--columns`` gated measurement columns.
+
+Timed (after a warm-up call; compilation reported separately; best of ``--repeats``):
+
+- one run: ``jax.jit`` of the scan (:func:`~jaxtrack.multitarget._base.scan_method`) on run 0;
+- a batch: ``jax.jit(jax.vmap(...))`` over ``--runs`` runs (default 8); per run = wall / runs.
+
+Also printed: the mean OSPA (``c = 100`` m, ``p = 1``, the toolbox's) and GOSPA (``c = 100`` m,
+``p = 1``, ``α = 2``) over scans and runs, the mean absolute cardinality error, and the capacity
+events and scans not ``ok`` (both must be 0).
+
+Usage::
+
+    python benchmarks/glmb.py [--runs 8] [--hypotheses 32] [--tracks 16] [--columns 24]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxtrack.multitarget as mt
+from jaxtrack.filters import KalmanFilter
+from jaxtrack.montecarlo import gospa, ospa
+from jaxtrack.multitarget._base import _record_estimates, scan_method
+
+
+def _filters(scen, st, args):
+    kw = dict(prob_survival=st.prob_survival, prob_detect=st.prob_detect, clutter_density=st.clutter_density,
+              birth=st.birth, max_tracks=args.tracks, max_hypotheses=args.hypotheses, gate=args.gate,
+              assignment_measurements=args.columns)
+    return {"GLMB": mt.GLMB(KalmanFilter(), scen.model, **kw), "LMB": mt.LMB(KalmanFilter(), scen.model, **kw)}
+
+
+def _best(fn, repeats):
+    best = np.inf
+    for _ in range(repeats):
+        t = time.perf_counter()
+        jax.block_until_ready(fn())
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--runs", type=int, default=8)
+    p.add_argument("--hypotheses", type=int, default=32)
+    p.add_argument("--tracks", type=int, default=16)
+    p.add_argument("--columns", type=int, default=24)
+    p.add_argument("--gate", type=float, default=4.0)
+    p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    scen, st = mt.vo_vo_linear(0)
+    trajs = mt.simulate_scenarios(scen, args.seed, args.runs)
+    z, v = trajs.scans.measurements, trajs.scans.valid
+    truth, alive = trajs.states[..., :2], trajs.alive
+    print(f"vo_vo_linear: {scen.num_steps} scans, {args.runs} runs, M = {scen.max_measurements} slots; "
+          f"H = {args.hypotheses}, N = {args.tracks}, A = {args.columns}, gate {args.gate}; device {jax.devices()[0]}")
+    for name, f in _filters(scen, st, args).items():
+        one = jax.jit(lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1])
+        batch = jax.jit(jax.vmap(lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1]))
+        t = time.perf_counter()
+        one.lower(z[0], v[0]).compile()
+        c1 = time.perf_counter() - t
+        t = time.perf_counter()
+        batch.lower(z, v).compile()
+        c8 = time.perf_counter() - t
+        jax.block_until_ready(one(z[0], v[0]))
+        out = jax.block_until_ready(batch(z, v))
+        t1 = _best(lambda: one(z[0], v[0]), args.repeats)
+        t8 = _best(lambda: batch(z, v), args.repeats)
+        est, ok, events = out
+        pos = est.states[..., :2]
+        o = jax.vmap(jax.vmap(lambda a, b, c, d: ospa(a, b, c, d, cutoff=st.ospa_cutoff, order=st.ospa_order).distance))(
+            truth, alive, pos, est.mask)
+        g = jax.vmap(jax.vmap(lambda a, b, c, d: gospa(a, b, c, d, cutoff=100.0, order=1.0).distance))(
+            truth, alive, pos, est.mask)
+        card = np.abs(np.asarray(est.mask.sum(-1)) - np.asarray(alive.sum(-1)))
+        print(f"{name:5s} compile one {c1:6.1f} s, batch {c8:6.1f} s | one run {t1:7.3f} s | batch of {args.runs}: "
+              f"{t8:7.3f} s = {t8 / args.runs:7.3f} s per run | mean OSPA {float(jnp.mean(o)):6.2f} m, "
+              f"GOSPA {float(jnp.mean(g)):6.2f} m, |card err| {card.mean():.3f}, capacity events "
+              f"{int(events[:, -1].sum())}, scans not ok {int((~ok).sum())}")
+
+
+if __name__ == "__main__":
+    main()
