@@ -10,13 +10,13 @@ the parameters of the random cases are array leaves of the same shapes.
 import math
 import warnings
 
+import _glmb_oracle as oracle
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import _glmb_oracle as oracle
 from jaxtrack import InputError
 from jaxtrack.filters import KalmanFilter
 from jaxtrack.models import LinearGaussianModel
@@ -52,7 +52,7 @@ def _model():
 def _random_case(seed, *, one_birth=False):
     """Random ``P_S, P_D, κ`` and an LMB birth of two labels (the second with ``r_B = 0``: one)."""
     rng = np.random.default_rng(seed)
-    means = [np.array([rng.uniform(-5, 5), rng.uniform(-5, 5), rng.uniform(-1, 1), rng.uniform(-1, 1)]) for _ in range(2)]
+    means = [np.concatenate([rng.uniform(-5, 5, 2), rng.uniform(-1, 1, 2)]) for _ in range(2)]
     covs = [np.diag(rng.uniform(2.0, 9.0, 4)) for _ in range(2)]
     r = [rng.uniform(0.2, 0.8), 0.0 if one_birth else rng.uniform(0.2, 0.8)]
     return oracle.LinearCase(F, Q, H, R, rng.uniform(0.8, 0.99), rng.uniform(0.6, 0.95), rng.uniform(1e-3, 2e-2),
@@ -168,8 +168,9 @@ def _prior_state(f, prior, step):
         logw[h] = math.log(w)
         for i, (l, m, P) in enumerate(tracks):
             labels[h, i], ex[h, i], means[h, i], covs[h, i] = l, 1.0, m, P
-    return eqx.tree_at(lambda x: (x.labels, x.existence, x.means, x.covs, x.log_weights, x.hypothesis_active, x.step), s,
-                       tuple(map(jnp.asarray, (labels, ex, means, covs, logw, logw > -np.inf, np.int32(step)))))
+    values = (labels, ex, means, covs, logw, logw > -np.inf, np.int32(step))
+    return eqx.tree_at(lambda x: (x.labels, x.existence, x.means, x.covs, x.log_weights, x.hypothesis_active, x.step),
+                       s, tuple(map(jnp.asarray, values)))
 
 
 def _prior(rng):
@@ -183,7 +184,8 @@ def _prior(rng):
 
 
 # (seed, one birth label, measurements in scan 1, in scan 2): every case has at most H_EXACT hypotheses.
-TWO_SCAN_CASES = [(1, True, 2, 2), (2, False, 1, 0), (3, False, 2, 0), (4, True, 3, 1), (7, True, 2, 3), (9, False, 0, 1)]
+TWO_SCAN_CASES = [(1, True, 2, 2), (2, False, 1, 0), (3, False, 2, 0), (4, True, 3, 1), (7, True, 2, 3),
+                  (9, False, 0, 1)]
 
 
 @pytest.mark.parametrize("seed,one_birth,m1,m2", TWO_SCAN_CASES)
@@ -260,13 +262,13 @@ def test_small_budget_keeps_exactly_the_heaviest_hypotheses(glmb_small, seed, pr
 
 
 def test_capacity_events_are_counted_and_warned(glmb_small):
-    case, rng = _random_case(41)
+    case, _ = _random_case(41)
     case.birth = [(0.99, m, P) for _, m, P in case.birth]
     f = _with(glmb_small, case)
     # Births almost sure every scan (r_B = 0.99): more labels than the 4 slots in the kept hypotheses.
     state = f.init()
     for k in range(4):
-        state, info = _step(f, state, *_scan([case.birth[0][1][:2], case.birth[1][1][:2] + 0.1]))
+        state, _ = _step(f, state, *_scan([case.birth[0][1][:2], case.birth[1][1][:2] + 0.1]))
     events = int(f.capacity_events(state))
     assert events > 0 and int(state.num_dropped_tracks) == events
     with pytest.warns(CapacityWarning, match="max_tracks=4"):
@@ -319,7 +321,7 @@ def _positions(states):
 
 
 def test_two_targets_keep_their_labels(vo_setup):
-    scen, st, f = vo_setup
+    scen, _, f = vo_setup
     # Two targets from two birth locations, little clutter, the benchmark's model and slots; always
     # detected (with P_D = 0.98 two misses in three scans can rightly make "died" the MAP cardinality).
     two = Scenario(scen.model, np.array([[400.0, -600.0, -10.0, 5.0], [-800.0, -200.0, 20.0, -5.0]]), [0, 0],
@@ -350,7 +352,7 @@ def test_vo_vo_linear_short_run(vo_setup):
 
 
 def test_runs_through_the_monte_carlo(vo_setup):
-    scen, st, f = vo_setup
+    scen, _, f = vo_setup
     with warnings.catch_warnings():
         warnings.simplefilter("error", CapacityWarning)
         mc = multitarget_monte_carlo(f, scen, 11, 2, cutoff=100.0, order=1.0, block_size=2)

@@ -25,9 +25,9 @@ label may sit in different slots in different hypotheses.
 **One scan: joint prediction and update** (Vo, Vo & Hoang 2017, "An efficient implementation of
 the generalized labeled multi-Bernoulli filter", IEEE TSP 65(8), 1975-1987; VVH17 below, Sec. III,
 the joint δ-GLMB recursion: ``ω^{(I,ξ)} ∝ Σ_θ w^{(I,ξ)} Π_ℓ η_Z(ℓ, θ(ℓ))``; the section and
-proposition structure is cited, equation numbers were not checked against the published PDF). For every prior row ``h`` the ``P = N + B`` candidate tracks are its ``N``
-slots followed by the ``B`` birth components of :attr:`GLMB.birth` (an LMB birth, each with its
-own ``r_B`` and label). Each candidate ``i`` with prior existence ``r_i`` (slot: ``r``; birth:
+proposition structure is cited, equation numbers were not checked against the published PDF).
+For every prior row ``h`` the ``P = N + B`` candidate tracks are its ``N`` slots followed by the
+``B`` birth components of :attr:`GLMB.birth` (an LMB birth, each with its own ``r_B`` and label). Each candidate ``i`` with prior existence ``r_i`` (slot: ``r``; birth:
 ``r_B``) takes exactly one of three kinds of choice, with weights (VVH17 Sec. III, the
 ``η_i(j)`` of its joint prediction–update, for a Gaussian single-target density):
 
@@ -55,7 +55,8 @@ Then the **projection strategy**:
   differed only in the history of a track that is now absent) are merged, their weights summed,
   as Vo & Vo's implementation does; renormalise;
 - :class:`LMBProjection`: project the (truncated) δ-GLMB posterior to an LMB (R14 Sec. III, the
-  LMB approximation that matches the first moment of the labelled posterior): ``r_ℓ = Σ_h w_h 1[ℓ ∈ I_h]`` and ``p_ℓ = Σ_h w_h 1[ℓ ∈ I_h] p_h(·, ℓ) / r_ℓ``,
+  LMB approximation that matches the first moment of the labelled posterior):
+  ``r_ℓ = Σ_h w_h 1[ℓ ∈ I_h]`` and ``p_ℓ = Σ_h w_h 1[ℓ ∈ I_h] p_h(·, ℓ) / r_ℓ``,
   collapsed to one Gaussian by moment matching; labels with ``r ≤ existence_threshold`` are
   removed. Since an LMB prior is one row whose candidates carry ``r_ℓ``, the next scan's joint
   step is exactly R14's "LMB → δ-GLMB, update" (the subsets of labels never need to be listed:
@@ -99,8 +100,16 @@ from ._mixture import GaussianMixture, check_mixture
 from ._phd import _scalar
 from ._scenario import _positive_int
 
-__all__ = ["GLMB", "LMB", "AbstractLabelledFilter", "GLMBState", "GLMBStepInfo", "AbstractLabelledProjection", "DeltaGLMB",
-           "LMBProjection"]
+__all__ = [
+    "GLMB",
+    "LMB",
+    "AbstractLabelledFilter",
+    "AbstractLabelledProjection",
+    "DeltaGLMB",
+    "GLMBState",
+    "GLMBStepInfo",
+    "LMBProjection",
+]
 
 
 class GLMBState(eqx.Module):
