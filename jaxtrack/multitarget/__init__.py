@@ -7,7 +7,8 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
 - ``_named_scenarios``: :func:`crossing_targets` (the library's crossing targets before a
   range–bearing radar) and :func:`williams15` (the coalescence scenario of Williams 2015 as
   García-Fernández's PMBM reference defines it, with its fixed truth and the reference's filter
-  settings, :class:`Williams15Settings`);
+  settings, :class:`Williams15Settings`) and :func:`vo_vo_linear` (the linear benchmark of Vo & Vo's
+  labelled-RFS papers, with its LMB birth, :class:`VoVoLinearSettings`);
 - ``_base``: the contract every multi-target method implements
   (:class:`AbstractMultiTargetFilter`: ``init``, ``step``, ``estimates``, ``capacity_events``),
   :class:`Estimates`, and :func:`run_multitarget`, the one scan that runs them all;
@@ -28,6 +29,10 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
   2018 with fixed track, hypothesis and Poisson budgets; Murty's ranked assignment);
 - ``_pmb``: :class:`PMB` (the track-oriented PMB filter of Williams 2015: the same step with the
   association marginals of :mod:`jaxtrack.association`);
+- ``_glmb``: :class:`GLMB` (the δ-GLMB filter of Vo & Vo 2013 with the joint prediction–update of
+  Vo, Vo & Hoang 2017: Murty's ranked assignment over all prior hypotheses, fixed track and
+  hypothesis budgets) and :class:`LMB` (Reuter et al. 2014: the same step projected to an LMB),
+  the projection strategies :class:`DeltaGLMB`, :class:`LMBProjection`, :class:`GLMBState`;
 - ``_learning``: :func:`fit_detection_and_clutter` (``P_D`` and the clutter density by maximum
   likelihood of the tracker's scan log-likelihood, with standard errors).
 """
@@ -43,8 +48,10 @@ from ._scenario import (
     simulate_scenarios as simulate_scenarios,
 )
 from ._named_scenarios import (
+    VoVoLinearSettings as VoVoLinearSettings,
     Williams15Settings as Williams15Settings,
     crossing_targets as crossing_targets,
+    vo_vo_linear as vo_vo_linear,
     williams15 as williams15,
 )
 from ._base import (
@@ -92,6 +99,16 @@ from ._multibernoulli import (
 from ._multibernoulli import AbstractGlobalHypotheses as AbstractGlobalHypotheses
 from ._pmbm import PMBM as PMBM, RankedAssignment as RankedAssignment
 from ._pmb import PMB as PMB, MarginalProjection as MarginalProjection
+from ._glmb import (
+    GLMB as GLMB,
+    LMB as LMB,
+    AbstractLabelledFilter as AbstractLabelledFilter,
+    AbstractLabelledProjection as AbstractLabelledProjection,
+    DeltaGLMB as DeltaGLMB,
+    GLMBState as GLMBState,
+    GLMBStepInfo as GLMBStepInfo,
+    LMBProjection as LMBProjection,
+)
 from ._tracker import (
     CONFIRMED as CONFIRMED,
     EMPTY as EMPTY,
@@ -116,6 +133,8 @@ __all__ = [
     "crossing_targets",
     "williams15",
     "Williams15Settings",
+    "vo_vo_linear",
+    "VoVoLinearSettings",
     "simulate_scenario",
     "simulate_scenarios",
     "CONFIRMED",
@@ -162,6 +181,14 @@ __all__ = [
     "PMBMStepInfo",
     "PMBMResult",
     "run_pmbm",
+    "GLMB",
+    "LMB",
+    "AbstractLabelledFilter",
+    "AbstractLabelledProjection",
+    "DeltaGLMB",
+    "LMBProjection",
+    "GLMBState",
+    "GLMBStepInfo",
 ]
 
 

@@ -1,11 +1,14 @@
-"""The named multi-target scenarios: :func:`crossing_targets` and :func:`williams15`.
+"""The named multi-target scenarios: :func:`crossing_targets`, :func:`williams15` and :func:`vo_vo_linear`.
 
 - :func:`crossing_targets`: the library's own test scenario, targets crossing in front of a
   range–bearing radar, the truth drawn per run;
 - :func:`williams15`: the linear-Gaussian coalescence scenario of Williams (2015) as García-Fernández's
   MATLAB reference of the PMBM filter defines it, with one truth fixed over the Monte Carlo runs
   (``Scenario(truth_states=...)``), and the filter and metric settings of that reference
-  (:class:`Williams15Settings`).
+  (:class:`Williams15Settings`);
+- :func:`vo_vo_linear`: the linear benchmark of the labelled-RFS papers of B.-T. Vo and B.-N. Vo
+  (12 noise-free tracks, at most 10 at once, in a 2 km square with 66 clutter points a scan), with
+  its LMB birth and filter settings (:class:`VoVoLinearSettings`).
 """
 
 from __future__ import annotations
@@ -19,11 +22,11 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._validation import InputError, as_key
-from ..models import ConstantVelocity, RangeBearing, TrackingModel, constant_velocity
+from ..models import ConstantVelocity, LinearGaussianModel, RangeBearing, TrackingModel, constant_velocity
 from ._mixture import GaussianMixture
 from ._scenario import Scenario, _positive_int
 
-__all__ = ["Williams15Settings", "crossing_targets", "williams15"]
+__all__ = ["VoVoLinearSettings", "Williams15Settings", "crossing_targets", "vo_vo_linear", "williams15"]
 
 # The Williams (2015) scenario of the MATLAB reference (ScenarioWilliams15.m, Scenario_number = 1),
 # converted to jaxtrack's state layout [x, y, vx, vy] (the reference's is [x, vx, y, vy]).
@@ -306,3 +309,151 @@ def crossing_targets(
         max_measurements=max_measurements,
         num_steps=num_steps,
     )
+
+
+# Vo & Vo's linear benchmark: the numbers of the labelled-RFS toolbox's gen_model.m / gen_truth.m
+# (B.-T. Vo's MATLAB code, folders glmb/gms and jointglmb/gms), MATLAB's state [x; vx; y; vy]
+# converted to jaxtrack's [x, y, vx, vy]. Each xstart is the state one step BEFORE the first scan
+# the target is alive in (gen_truth.m moves it once before storing it).
+VO_VO_NUM_STEPS = 100  # truth.K
+VO_VO_SAMPLE_PERIOD = 1.0  # model.T, s
+VO_VO_SIGMA_V = 5.0  # model.sigma_v, m/s²: Q = σ_v² G Gᵀ, G = [T²/2; T] per axis
+VO_VO_MEASUREMENT_STD = 10.0  # model.D = diag([10; 10]) m
+VO_VO_PROB_SURVIVAL = 0.99  # model.P_S
+VO_VO_PROB_DETECT = 0.98  # model.P_D
+VO_VO_CLUTTER_RATE = 66.0  # Vo, Vo & Phung 2014, Sec. V (the toolbox's gen_model.m has 30)
+VO_VO_REGION = 1000.0  # model.range_c = [-1000 1000; -1000 1000] m
+VO_VO_BIRTH_R = 0.03  # model.r_birth
+VO_VO_BIRTH_MEANS = ((0.1, 0.1, 0.0, 0.0), (400.0, -600.0, 0.0, 0.0), (-800.0, -200.0, 0.0, 0.0),
+                     (-200.0, 800.0, 0.0, 0.0))  # model.m_birth{1..4} as [x, y, vx, vy]
+VO_VO_BIRTH_STD = 10.0  # model.B_birth = diag([10; 10; 10; 10]): P = B Bᵀ = 100 I₄ (m², m²/s²)
+# (xstart as [x, y, vx, vy], tbirth, tdeath), 1-indexed as in gen_truth.m: alive at scans
+# tbirth..min(tdeath, K).
+VO_VO_TRUTH = (
+    ((0.0, 0.0, 0.0, -10.0), 1, 70), ((400.0, -600.0, -10.0, 5.0), 1, 101), ((-800.0, -200.0, 20.0, -5.0), 1, 70),
+    ((400.0, -600.0, -7.0, -4.0), 20, 101), ((400.0, -600.0, -2.5, 10.0), 20, 101), ((0.0, 0.0, 7.5, -5.0), 20, 101),
+    ((-800.0, -200.0, 12.0, 7.0), 40, 101), ((-200.0, 800.0, 15.0, -10.0), 40, 101),
+    ((-800.0, -200.0, 3.0, 15.0), 60, 101), ((-200.0, 800.0, -3.0, -15.0), 60, 101),
+    ((0.0, 0.0, -20.0, -15.0), 80, 101), ((-200.0, 800.0, 15.0, -5.0), 80, 101),
+)
+
+
+class VoVoLinearSettings(eqx.Module):
+    """The filter and metric settings of Vo & Vo's linear benchmark (:func:`vo_vo_linear`), in
+    jaxtrack's state layout ``[x, y, vx, vy]`` (m, m, m/s, m/s).
+
+    **Fields:**
+
+    - ``prob_survival``: ``P_S = 0.99``; ``prob_detect``: ``P_D = 0.98`` (``()``).
+    - ``clutter_rate``: ``λ = 66`` per scan; ``clutter_density``: ``66 / 2000²`` = 1.65e-5 per m².
+    - ``birth_weights`` ``(4,)``: ``r_B = 0.03`` each; ``birth_means`` ``(4, 4)``: ``[0.1, 0.1, 0,
+      0]``, ``[400, −600, 0, 0]``, ``[−800, −200, 0, 0]``, ``[−200, 800, 0, 0]``; ``birth_covs``
+      ``(4, 4, 4)``: ``100·I₄`` (m², m²/s²). :attr:`birth` is the LMB birth as
+      :class:`~jaxtrack.multitarget.GLMB` and :class:`~jaxtrack.multitarget.LMB` take it.
+    - ``ospa_cutoff``: ``c = 100`` m, ``ospa_order``: ``p = 1`` (the toolbox's ``plot_results.m``).
+    """
+
+    prob_survival: Float[Array, ""]
+    prob_detect: Float[Array, ""]
+    clutter_rate: Float[Array, ""]
+    clutter_density: Float[Array, ""]
+    birth_weights: Float[Array, " B"]
+    birth_means: Float[Array, "B n"]
+    birth_covs: Float[Array, "B n n"]
+    ospa_cutoff: float = eqx.field(static=True)
+    ospa_order: float = eqx.field(static=True)
+
+    @property
+    def birth(self) -> GaussianMixture:
+        """The LMB birth (weights = ``r_B``), as ``GLMB(birth=...)`` takes it."""
+        return GaussianMixture(self.birth_weights, self.birth_means, self.birth_covs)
+
+
+def vo_vo_linear(key: PRNGKeyArray | int = 0, *, max_measurements: int = 128,
+                 num_steps: int = VO_VO_NUM_STEPS) -> tuple[Scenario, VoVoLinearSettings]:
+    r"""Vo & Vo's linear multi-target benchmark of the labelled random-finite-set filters.
+
+    B.-T. Vo & B.-N. Vo (2013), "Labeled random finite sets and multi-object conjugate priors",
+    IEEE TSP 61(13), Sec. V; B.-N. Vo, B.-T. Vo & D. Phung (2014), "Labeled random finite sets and
+    the Bayes multi-target tracking filter", IEEE TSP 62(24), Sec. V-A; also the δ-GLMB and LMB
+    demos of Vo & Vo's MATLAB toolbox, whose ``gen_model.m`` and ``gen_truth.m`` give every number
+    below (read, not copied; folder ``glmb/gms``). jaxtrack's state is ``[x, y, vx, vy]`` (m, m/s;
+    ``model.state_layout``); MATLAB's is ``[x; vx; y; vy]`` and every number is converted.
+
+    - ``T = 100`` scans, sampling period 1 s (``model.T``); nearly constant velocity with
+      discrete white acceleration: ``F = [[I₂, I₂], [0, I₂]]``, ``Q = σ_v² G Gᵀ`` with
+      ``G = [[½ I₂], [I₂]]``, ``σ_v = 5`` m/s² (``model.sigma_v``) — *not* the continuous-noise
+      ``Q`` of :func:`~jaxtrack.models.constant_velocity`; ``z = [x, y] + v``, ``R = 10²·I₂`` m².
+    - ``P_S = 0.99``, ``P_D = 0.98``; clutter ``Poisson(66)`` a scan, uniform over
+      ``[−1000, 1000]²`` m (density 1.65e-5 m⁻²). ``λ = 66`` is the papers' value (VVP14 Sec. V;
+      the brief's); the toolbox's ``gen_model.m`` we read sets ``lambda_c = 30`` — not confirmed
+      against the published PDF here.
+    - The truth (``gen_truth.m``): 12 tracks, noise-free (``'noiseless'``), born at scans 1, 1, 1,
+      20, 20, 20, 40, 40, 60, 60, 80, 80 (1-indexed); tracks 1 and 3 die after scan 70, the others
+      live to the end, so at most 10 targets are alive at once ("10 targets" in the papers' text
+      means this maximum). Target ``j`` is alive at 0-indexed scans ``tbirth_j − 1 …
+      min(tdeath_j, 100) − 1`` and its state at the first of them is ``F·xstart_j`` (the toolbox
+      moves the start state once before storing it).
+    - The LMB birth (:class:`VoVoLinearSettings`): four labels a scan, ``r_B = 0.03``, means
+      ``[0.1, 0.1, 0, 0]``, ``[400, −600, 0, 0]``, ``[−800, −200, 0, 0]``, ``[−200, 800, 0, 0]``,
+      covariance ``10²·I₄``.
+
+    **Arguments:**
+
+    - ``key``: accepted for the named-scenario signature (the truth is fixed, so it is unused;
+      the detections and clutter are drawn per run by the simulation's key).
+    - ``max_measurements``: the slots of a scan (static int); default 128: at most 10 detections plus
+      ``Poisson(66)`` clutter exceed it with probability 2.9e-9 per scan (1.5e-5 for 112) (an overflow is
+      counted and warned, as for any :class:`Scenario`).
+    - ``num_steps``: the first ``num_steps`` scans of the 100 (default 100), for short tests.
+
+    **Returns:** ``(scenario, settings)``: the :class:`Scenario` (``N = 12`` targets, ``n = 4``,
+    ``m = 2``, noise-free truth; its model's prior is the first birth component) and
+    :class:`VoVoLinearSettings`.
+
+    **Raises:** ``InputError`` for a bad ``key``, ``max_measurements`` or ``num_steps``.
+    """
+    as_key(key)
+    max_measurements = _positive_int("max_measurements", max_measurements)
+    num_steps = _positive_int("num_steps", num_steps)
+    if num_steps > VO_VO_NUM_STEPS:
+        raise InputError(f"`num_steps` must be at most {VO_VO_NUM_STEPS} (the benchmark's scans); got {num_steps}.")
+    T = VO_VO_SAMPLE_PERIOD
+    I2, Z2 = np.eye(2), np.zeros((2, 2))
+    F = np.block([[I2, T * I2], [Z2, I2]])
+    G = np.vstack([0.5 * T**2 * I2, T * I2])
+    Q = VO_VO_SIGMA_V**2 * G @ G.T
+    H = np.hstack([I2, Z2])
+    R = VO_VO_MEASUREMENT_STD**2 * I2
+    birth_means = np.asarray(VO_VO_BIRTH_MEANS)
+    birth_cov = VO_VO_BIRTH_STD**2 * np.eye(4)
+    model = LinearGaussianModel(F, Q, H, R, birth_means[0], birth_cov, state_layout=("x", "y", "vx", "vy"))
+    dtype = model.initial_mean.dtype
+    start = np.array([x for x, _, _ in VO_VO_TRUTH])
+    birth = np.array([b - 1 for _, b, _ in VO_VO_TRUTH], np.int64)
+    death = np.array([min(d, VO_VO_NUM_STEPS) for _, _, d in VO_VO_TRUTH], np.int64)
+    # Targets born after the run's end are padded slots (birth_step >= num_steps is never alive).
+    death = np.minimum(death, num_steps)
+    death = np.maximum(death, birth + 1)
+    scenario = Scenario(
+        model, start @ F.T, birth, death,
+        detection_probability=VO_VO_PROB_DETECT,
+        clutter_rate=VO_VO_CLUTTER_RATE,
+        clutter_region=np.array([[-VO_VO_REGION, VO_VO_REGION], [-VO_VO_REGION, VO_VO_REGION]]),
+        max_measurements=max_measurements,
+        num_steps=num_steps,
+        process_noise=False,
+    )
+    B = birth_means.shape[0]
+    settings = VoVoLinearSettings(
+        prob_survival=jnp.asarray(VO_VO_PROB_SURVIVAL, dtype),
+        prob_detect=jnp.asarray(VO_VO_PROB_DETECT, dtype),
+        clutter_rate=jnp.asarray(VO_VO_CLUTTER_RATE, dtype),
+        clutter_density=jnp.asarray(VO_VO_CLUTTER_RATE / (2.0 * VO_VO_REGION) ** 2, dtype),
+        birth_weights=jnp.full((B,), VO_VO_BIRTH_R, dtype),
+        birth_means=jnp.asarray(birth_means, dtype),
+        birth_covs=jnp.broadcast_to(jnp.asarray(birth_cov, dtype), (B, 4, 4)),
+        ospa_cutoff=100.0,
+        ospa_order=1.0,
+    )
+    return scenario, settings
