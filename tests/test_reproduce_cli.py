@@ -125,6 +125,7 @@ def test_every_study_is_registered_and_reproducible():
 
     from jaxtrack.cli._reproduce import STUDIES
 
-    assert set(STUDIES) == {"ho", "bias", "sar", "registration", "tma", "maneuvering", "multitarget", "williams15"}
+    assert set(STUDIES) == {"ho", "bias", "sar", "registration", "tma", "maneuvering", "multitarget", "williams15",
+                            "labelled"}
     for module_name, title in STUDIES.values():
         assert callable(importlib.import_module(module_name).reproduce) and title

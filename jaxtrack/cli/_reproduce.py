@@ -24,6 +24,8 @@ STUDIES = {
     "williams15": ("jaxtrack.applications.williams15",
                    "Williams 2015 scenario: GM-PHD, GM-CPHD, PMB, PMBM and the JPDA tracker (reference scenario; "
                    "claims with margins)"),
+    "labelled": ("jaxtrack.applications.vo_vo",
+                 "Vo & Vo linear benchmark: delta-GLMB and LMB filters (reference scenario; claims with margins)"),
 }
 
 
@@ -41,6 +43,8 @@ NEEDS_FLOAT64 = {
                    "differences log-likelihoods of order 1e3 nats (not measured in float32)",
     "williams15": "its claims are calibrated in float64; the CPHD's cardinality recursion and the PMBM's "
                   "hypothesis weights are summed in log space over many orders of magnitude (not measured in float32)",
+    "labelled": "its claims are calibrated in float64; the hypothesis weights of the delta-GLMB are "
+                "normalised in log space over many orders of magnitude (not measured in float32)",
     "multitarget": "its claims are calibrated in float64; the trackers' 3 km initiation prior and the "
                    "2 mrad bearing noise span 7 decades in one covariance (not measured in float32)",
 }

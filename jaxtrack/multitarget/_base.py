@@ -15,9 +15,10 @@ optax's ``init``/``update`` shape:
   for, scans an associator could not answer), summed over the run — never lost in silence.
 
 :class:`~jaxtrack.multitarget.Tracker` (GNN, JPDA, JIPDA), :class:`~jaxtrack.multitarget.GMPHD`,
-:class:`~jaxtrack.multitarget.GMCPHD`, :class:`~jaxtrack.multitarget.PMB` and
-:class:`~jaxtrack.multitarget.PMBM` implement it; :func:`run_multitarget` (one ``lax.scan``) and
-:func:`~jaxtrack.multitarget.multitarget_monte_carlo` serve all five, with no dispatch on the
+:class:`~jaxtrack.multitarget.GMCPHD`, :class:`~jaxtrack.multitarget.PMB`,
+:class:`~jaxtrack.multitarget.PMBM`, :class:`~jaxtrack.multitarget.GLMB` and
+:class:`~jaxtrack.multitarget.LMB` implement it; :func:`run_multitarget` (one ``lax.scan``) and
+:func:`~jaxtrack.multitarget.multitarget_monte_carlo` serve all seven, with no dispatch on the
 family. A new family gets both by implementing the four methods. The state layout (the order of
 the state components) is the single-target model's: ``model.state_layout``, e.g.
 ``("x", "y", "vx", "vy")`` for :class:`~jaxtrack.models.ConstantVelocity` in the plane.
@@ -52,7 +53,7 @@ class Estimates(NamedTuple):
 
     ``states`` ``(K, n)``: the targets' states in the model's units and layout (``model.state_layout``),
     0 where masked; ``mask`` ``(K,)`` bool: the rows that hold a target; ``ids`` ``(K,)`` int32:
-    the track identity of each row for a labelled method (tracker, PMB, PMBM), the mixture slot for
+    the track identity of each row for a labelled method (tracker, PMB, PMBM, GLMB, LMB), the mixture slot for
     a GM-PHD/GM-CPHD (no identity across scans), −1 where masked.
     """
 
@@ -118,7 +119,7 @@ def check_method(method, name: str = "method") -> None:
     """:class:`~jaxtrack.InputError` unless ``method`` implements the multi-target contract."""
     if not isinstance(method, AbstractMultiTargetFilter):
         raise InputError(
-            f"`{name}` must be a multi-target method (Tracker, GMPHD, GMCPHD, PMB, PMBM or another "
+            f"`{name}` must be a multi-target method (Tracker, GMPHD, GMCPHD, PMB, PMBM, GLMB, LMB or another "
             f"AbstractMultiTargetFilter); got {type(method).__name__}."
         )
 
@@ -205,7 +206,8 @@ def run_multitarget(
 
     - ``method``: a :class:`AbstractMultiTargetFilter` (:class:`~jaxtrack.multitarget.Tracker`,
       :class:`~jaxtrack.multitarget.GMPHD`, :class:`~jaxtrack.multitarget.GMCPHD`,
-      :class:`~jaxtrack.multitarget.PMB`, :class:`~jaxtrack.multitarget.PMBM`, or your own).
+      :class:`~jaxtrack.multitarget.PMB`, :class:`~jaxtrack.multitarget.PMBM`,
+      :class:`~jaxtrack.multitarget.GLMB`, :class:`~jaxtrack.multitarget.LMB`, or your own).
     - ``measurements``: ``(T, M, m)`` padded scans in the sensor's units (padding may be NaN);
       ``valid``: boolean ``(T, M)``, False for padding (a scenario's ``trajectory.scans``).
     - ``save_info``: also keep every scan's step record (``info``).

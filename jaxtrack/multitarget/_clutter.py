@@ -14,7 +14,7 @@ Clutter is a Poisson point process on a region of measurement space (Bar-Shalom,
   too, with the same meaning, so a Stone Soup user's number carries over.
 
 Every multi-target constructor (:class:`~jaxtrack.multitarget.Tracker`, ``GMPHD``, ``GMCPHD``,
-``PMB``, ``PMBM``) takes ``clutter_density`` (or ``clutter_spatial_density``), or ``clutter_rate``
+``PMB``, ``PMBM``, ``GLMB``, ``LMB``) takes ``clutter_density`` (or ``clutter_spatial_density``), or ``clutter_rate``
 with ``clutter_volume``; ``scenario.clutter_density`` converts a scenario's rate and region.
 """
 

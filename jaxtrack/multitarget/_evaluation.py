@@ -282,8 +282,8 @@ def multitarget_monte_carlo(
     ``simulate_scenario(scenario, fold_in(key, i))``), runs ``method`` over its scans (the scan of
     :func:`~jaxtrack.multitarget.run_multitarget`) and scores the positions of its
     :meth:`~jaxtrack.multitarget.AbstractMultiTargetFilter.estimates` against the alive targets'
-    (:func:`score_tracks`): a tracker's confirmed tracks, a PMBM's or PMB's estimated tracks (with
-    their ids), a GM-PHD's or GM-CPHD's extracted estimates (unlabelled, so their track-level
+    (:func:`score_tracks`): a tracker's confirmed tracks, a PMBM's, PMB's, GLMB's or LMB's estimated tracks
+    (with their ids: labels for the last two), a GM-PHD's or GM-CPHD's extracted estimates (unlabelled, so their track-level
     counts are not meaningful). Runs go in blocks of ``block_size`` vmapped runs (one
     compilation); the sums are added in block order (the statistics do not depend on how the runs
     are split), every run's GOSPA per scan is written to a ``(R, T)`` store.
@@ -293,7 +293,8 @@ def multitarget_monte_carlo(
     - ``method``: any :class:`~jaxtrack.multitarget.AbstractMultiTargetFilter`
       (:class:`~jaxtrack.multitarget.Tracker`, :class:`~jaxtrack.multitarget.GMPHD`,
       :class:`~jaxtrack.multitarget.GMCPHD`, :class:`~jaxtrack.multitarget.PMB`,
-      :class:`~jaxtrack.multitarget.PMBM`; its model may differ from the scenario's: a mismatched
+      :class:`~jaxtrack.multitarget.PMBM`, :class:`~jaxtrack.multitarget.GLMB`,
+      :class:`~jaxtrack.multitarget.LMB`; its model may differ from the scenario's: a mismatched
       study); ``scenario``: a :class:`Scenario`. Both models must declare their state layout (the
       position components are scored).
     - ``key``: PRNG key or int seed; ``num_runs``: ``R ≥ 2``.
