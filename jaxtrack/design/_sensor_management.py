@@ -470,27 +470,116 @@ def _relaxed_run(problem, logits0, betas, learning_rate):
     return jax.vmap(one_start)(logits0)
 
 
-def _neighbours(schedule: Array, num_targets: int) -> Array:
-    """Every schedule one move from ``schedule`` ``(T, S)``: the joint look of one scan replaced by
-    another (``T·N^S`` trials, the schedule itself among them; for one sensor, one look given to
-    another target) or two looks exchanged (``TS(TS−1)/2``)."""
-    T, S = schedule.shape
-    configs = _configurations(num_targets, S)
-    scan, config = (a.ravel() for a in np.meshgrid(np.arange(T), np.arange(len(configs)), indexing="ij"))
-    looks = jnp.asarray(configs[config], dtype=schedule.dtype)
-    single = jax.vmap(lambda k, c: schedule.at[k].set(c))(jnp.asarray(scan, dtype=jnp.int32), looks)
+def _target_cost(problem: SensorSchedulingProblem, target: Array, looks: Array) -> Array:
+    """``c_i Σ_k tr(L P^{(i)}_{k/k})`` of one target ``i`` (an int, may be traced) under its own
+    looks ``(T, S)`` (1 where sensor ``s`` looks at it at scan ``k``): the cost is a sum of such
+    per-target terms, which is what makes the local search incremental."""
+    F, Q, H, P0 = (a[target] for a in (problem.transition_matrix, problem.process_noise_cov,
+                                        problem.measurement_matrix, problem.initial_cov))
+
+    def scan(P, w):
+        P = _target_scan(P, F, Q, H, problem.measurement_noise_cov, w)
+        return P, jnp.einsum("ab,ba->", problem.weight, P)
+
+    _, traces = jax.lax.scan(scan, P0, looks)
+    return problem.target_weights[target] * jnp.sum(traces)
+
+
+def _looks_of(schedule: Array, target: Array, dtype) -> Array:
+    """Target ``target``'s looks ``(T, S)`` in ``schedule`` ``(T, S)``, as 0/1 weights."""
+    return (schedule == target).astype(dtype)
+
+
+def _swap_pairs(num_scans: int, num_sensors: int) -> tuple[np.ndarray, np.ndarray]:
+    """The flat positions ``(p, q)``, ``p < q``, of the exchanges worth trying, in
+    ``np.triu_indices`` order: two looks at the same scan exchanged give a joint look of that scan,
+    which the single moves (tried first) already cover, so those pairs are left out."""
+    p, q = np.triu_indices(num_scans * num_sensors, k=1)
+    keep = p // num_sensors != q // num_sensors
+    return p[keep].astype(np.int32), q[keep].astype(np.int32)
+
+
+def _move_costs(problem: SensorSchedulingProblem, schedule: Array) -> tuple[Array, Array, Array]:
+    r"""The exact cost of every neighbour of ``schedule`` ``(T, S)``, recomputing only the targets a
+    move changes.
+
+    ``J = Σ_i J_i`` with ``J_i`` (:func:`_target_cost`) depending only on target ``i``'s own looks.
+
+    - A single move changes the joint look of one scan ``k``: each target's row ``k`` becomes the
+      set of sensors now looking at it, one of ``2^S`` subsets. The table
+      ``D[i, k, m] = J_i`` (row ``k`` of ``i``'s looks set to subset ``m``, the other rows as they
+      are) holds all of them (``N·T·2^S`` one-target recursions), and a move's cost is
+      ``Σ_i D[i, k, m_i]``: ``T·N^S`` moves for the price of ``N·T·2^S`` recursions instead of
+      ``T·N^S·N``.
+    - An exchange of the looks at ``(k, s)`` and ``(l, s')`` (targets ``a ≠ b``) changes two rows
+      of ``a`` and of ``b`` only: their two recursions are redone, the other ``N − 2`` targets' ``J_i``
+      reused. An exchange of a target with itself is no move (cost ``+∞``, never taken).
+
+    **Returns:** ``(singles (T, N^S), swaps (P,), per_target (N,))``: the costs of the single moves
+    (the current joint look among them), of the exchanges of :func:`_swap_pairs` and the current
+    ``J_i``.
+    """
+    T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
+    dtype = problem.initial_cov.dtype
+    targets = jnp.arange(N)
+    looks = jax.vmap(lambda i: _looks_of(schedule, i, dtype))(targets)  # (N, T, S)
+    subsets = jnp.asarray((np.arange(2**S)[:, None] >> np.arange(S)) & 1, dtype)  # (2^S, S)
+
+    def table_entry(i, k, m):
+        return _target_cost(problem, i, looks[i].at[k].set(subsets[m]))
+
+    i, k, m = (jnp.asarray(a.ravel(), jnp.int32)
+               for a in np.meshgrid(np.arange(N), np.arange(T), np.arange(2**S), indexing="ij"))
+    D = jax.vmap(table_entry)(i, k, m).reshape(N, T, 2**S)
+    # Row subset each target gets under each joint look: bit s set when sensor s looks at it.
+    configs = _configurations(N, S)
+    subset_of = jnp.asarray(((configs[:, :, None] == np.arange(N)) * (2 ** np.arange(S))[None, :, None]).sum(1),
+                            jnp.int32)  # (N^S, N)
+    singles = jnp.sum(D[targets[None, None, :], jnp.arange(T)[:, None, None], subset_of[None]], axis=-1)
+    # The current J_i: row 0 set to the subset it already has.
+    current = jnp.sum(looks[:, 0, :].astype(jnp.int32) * (2 ** jnp.arange(S))[None, :], axis=-1)
+    per_target = D[targets, 0, current]
+
     flat = schedule.reshape(T * S)
-    a, b = (jnp.asarray(x, dtype=jnp.int32) for x in np.triu_indices(T * S, k=1))
-    swaps = jax.vmap(lambda a, b: flat.at[a].set(flat[b]).at[b].set(flat[a]))(a, b)
-    return jnp.concatenate([single, swaps.reshape(-1, T, S)])
+    p, q = (jnp.asarray(a) for a in _swap_pairs(T, S))
+
+    def swap(p, q):
+        a, b = flat[p], flat[q]
+        trial = flat.at[p].set(b).at[q].set(a).reshape(T, S)
+        ca = _target_cost(problem, a, _looks_of(trial, a, dtype))
+        cb = _target_cost(problem, b, _looks_of(trial, b, dtype))
+        return jnp.where(a == b, jnp.inf, jnp.sum(per_target.at[a].set(ca).at[b].set(cb)))
+
+    swaps = jax.vmap(swap)(p, q) if p.size else jnp.zeros((0,), dtype)
+    return singles, swaps, per_target
+
+
+def _apply_move(problem: SensorSchedulingProblem, schedule: Array, move: Array) -> Array:
+    """The neighbour number ``move`` of ``schedule``: single moves first (scan-major, joint looks in
+    :func:`_configurations` order), then the exchanges of :func:`_swap_pairs`."""
+    T, S = schedule.shape
+    configs = jnp.asarray(_configurations(problem.num_targets, S))
+    num_single = T * configs.shape[0]
+    k, j = jnp.divmod(jnp.minimum(move, num_single - 1), configs.shape[0])
+    single = schedule.at[k].set(configs[j])
+    p_all, q_all = _swap_pairs(T, S)
+    if p_all.size == 0:
+        return single
+    idx = jnp.clip(move - num_single, 0, p_all.size - 1)
+    p, q = jnp.asarray(p_all)[idx], jnp.asarray(q_all)[idx]
+    flat = schedule.reshape(T * S)
+    swapped = flat.at[p].set(flat[q]).at[q].set(flat[p]).reshape(T, S)
+    return jnp.where(move < num_single, single, swapped)
 
 
 def _polish_one(problem, schedule, max_iter, rtol):
-    """Best-improvement local search on the exact discrete cost over :func:`_neighbours`."""
+    """Best-improvement local search on the exact discrete cost: every iteration takes the
+    cheapest neighbour (:func:`_move_costs`; the first in :func:`_apply_move` order among equals)
+    while it lowers ``J`` by more than ``rtol·|J|``."""
 
     def costs_of(schedule):
-        trials = _neighbours(schedule, problem.num_targets)
-        return trials, jax.vmap(lambda t: _relaxed_cost(problem, _one_hot(problem, t)))(trials)
+        singles, swaps, per_target = _move_costs(problem, schedule)
+        return jnp.concatenate([singles.ravel(), swaps]), jnp.sum(per_target)
 
     def cond(carry):
         _, _, moves, improved = carry
@@ -498,17 +587,18 @@ def _polish_one(problem, schedule, max_iter, rtol):
 
     def body(carry):
         schedule, J, moves, _ = carry
-        trials, costs = costs_of(schedule)
+        costs, _ = costs_of(schedule)
         best = jnp.argmin(costs)
         improved = costs[best] < J - rtol * jnp.abs(J)
-        return (jnp.where(improved, trials[best], schedule), jnp.where(improved, costs[best], J),
-                moves + improved.astype(moves.dtype), improved)
+        return (jnp.where(improved, _apply_move(problem, schedule, best), schedule),
+                jnp.where(improved, costs[best], J), moves + improved.astype(moves.dtype), improved)
 
-    J0 = _relaxed_cost(problem, _one_hot(problem, schedule))
+    J0 = jnp.sum(jax.vmap(lambda i: _target_cost(problem, i, _looks_of(schedule, i, problem.initial_cov.dtype)))(
+        jnp.arange(problem.num_targets)))
     schedule, J, moves, improved = jax.lax.while_loop(
         cond, body, (schedule, J0, jnp.asarray(0, jnp.int32), jnp.asarray(True)))
     # At the cap the loop stops without knowing whether one more move would help: look once more.
-    still = jnp.min(costs_of(schedule)[1]) < J - rtol * jnp.abs(J)
+    still = jnp.min(costs_of(schedule)[0]) < J - rtol * jnp.abs(J)
     return schedule, J, moves, improved & still
 
 
