@@ -179,7 +179,7 @@ def test_incremental_local_search_equals_full_evaluation(which):
     schedule and the same J as costing every neighbour in full."""
     from jaxtrack.design._sensor_management import _polish
 
-    sc, problem = {"small": small, "two": two_sensors}[which]()
+    _, problem = {"small": small, "two": two_sensors}[which]()
     T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
     # Four starts: the shape relaxed_sensor_schedule's own call compiled.
     starts = np.random.default_rng(5).integers(0, N, (4, T, S)).astype(np.int32)
