@@ -10,6 +10,7 @@ compiles once per scenario.
 from __future__ import annotations
 
 import functools
+import itertools
 import warnings
 
 import equinox as eqx
@@ -143,6 +144,53 @@ def test_greedy_is_the_per_scan_brute_force():
         prefix = SensorSchedulingProblem(sc.models(), k + 1)
         costs = numpy_costs(prefix, trials[:, : k + 1, None])
         assert schedule[k] == int(np.argmin(costs))
+
+
+def _full_evaluation_search(problem, schedule, rtol=1e-12):
+    """The local search as it was before it became incremental: every neighbour (each scan's joint
+    look replaced by each of the N^S joint looks, scan-major; then every exchange of two looks in
+    ``np.triu_indices`` order, same-scan ones included) costed in FULL, the first cheapest taken
+    while it improves by more than ``rtol·|J|``. Python loop, NumPy neighbours."""
+    from jaxtrack.design._sensor_management import _discrete_cost
+
+    T, S = schedule.shape
+    configs = np.array(list(itertools.product(range(problem.num_targets), repeat=S)))
+    cost = eqx.filter_jit(jax.vmap(_discrete_cost, in_axes=(None, 0)))
+    J, moves = float(_discrete_cost(problem, jnp.asarray(schedule))), 0
+    while True:
+        singles = np.repeat(schedule[None], T * len(configs), axis=0)
+        singles[np.arange(len(singles)), np.repeat(np.arange(T), len(configs))] = np.tile(configs, (T, 1))
+        a, b = np.triu_indices(T * S, k=1)
+        swaps = np.repeat(schedule.reshape(1, T * S), len(a), axis=0)
+        rows = np.arange(len(a))
+        swaps[rows, a], swaps[rows, b] = swaps[rows, b], swaps[rows, a].copy()
+        trials = np.concatenate([singles, swaps.reshape(-1, T, S)])
+        costs = np.asarray(cost(problem, jnp.asarray(trials, jnp.int32)))
+        best = int(np.argmin(costs))
+        if not costs[best] < J - rtol * abs(J):
+            return schedule, J, moves
+        schedule, J, moves = trials[best], float(costs[best]), moves + 1
+
+
+@pytest.mark.parametrize("which", ["small", "two"])
+def test_incremental_local_search_equals_full_evaluation(which):
+    """The search recosts only the targets a move changes (per-target tables for single moves, two
+    recursions per exchange): from random schedules it must take the same moves, reach the same
+    schedule and the same J as costing every neighbour in full."""
+    from jaxtrack.design._sensor_management import _polish
+
+    _, problem = {"small": small, "two": two_sensors}[which]()
+    T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
+    # Four starts: the shape relaxed_sensor_schedule's own call compiled.
+    starts = np.random.default_rng(5).integers(0, N, (4, T, S)).astype(np.int32)
+    schedules, J, moves, still = _polish(problem, jnp.asarray(starts), jnp.asarray(T * S * N, jnp.int32),
+                                         jnp.asarray(1e-12))
+    assert np.sum(np.asarray(moves)) > 0 and not np.any(np.asarray(still))
+    for r in range(len(starts)):
+        ref_schedule, ref_J, ref_moves = _full_evaluation_search(problem, starts[r])
+        np.testing.assert_array_equal(np.asarray(schedules)[r], ref_schedule)
+        assert int(np.asarray(moves)[r]) == ref_moves
+        np.testing.assert_allclose(float(np.asarray(J)[r]), ref_J, rtol=1e-13)
 
 
 def _central_difference(f, x, direction, h):
