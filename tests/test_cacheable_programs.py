@@ -90,9 +90,10 @@ def test_throw_still_raises_eagerly_and_under_jit(call):
     assert bool(jnp.all(fn(Z).ok))  # a finite run passes
     with pytest.raises(eqx.EquinoxRuntimeError, match="non-finite"):
         fn(Z_OVERFLOW)
-    # Under the caller's jit the check is an error_if in the caller's program.
-    with pytest.raises(Exception, match="non-finite"):
-        jax.block_until_ready(jax.jit(fn)(jnp.asarray(Z_OVERFLOW)))
+    if call in ("run_filter", "rts_smoother"):  # the same helper serves all five: two suffice
+        # Under the caller's jit the check is an error_if in the caller's program.
+        with pytest.raises(Exception, match="non-finite"):
+            jax.block_until_ready(jax.jit(fn)(jnp.asarray(Z_OVERFLOW)))
 
 
 def test_simulate_throw_raises_eagerly():
