@@ -19,10 +19,10 @@ from jaxtrack.filters import (
     InteractingMultipleModel,
     KalmanFilter,
     imm_smoother,
+    rts_smoother,
     run_filter,
     run_filter_batch,
     run_imm,
-    rts_smoother,
 )
 from jaxtrack.models import LinearGaussianModel, constant_velocity
 from jaxtrack.montecarlo import simulate

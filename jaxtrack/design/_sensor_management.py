@@ -67,18 +67,24 @@ import numpy as np
 import optax
 from jaxtyping import Array, ArrayLike, Float
 
-from .._validation import InputError, check_covariance, check_finite, check_shape, is_concrete
+from .._validation import (
+    InputError,
+    check_covariance,
+    check_finite,
+    check_shape,
+    is_concrete,
+)
 from ..filters._linalg import cholesky_and_inverse, matmul
 from ..models import LinearGaussianModel
 from ._schedules import NotConvergedWarning
 
 __all__ = [
-    "SensorSchedulingProblem",
     "SensorScheduleDesign",
-    "schedule_cost",
-    "relaxed_schedule_cost",
+    "SensorSchedulingProblem",
     "greedy_sensor_schedule",
+    "relaxed_schedule_cost",
     "relaxed_sensor_schedule",
+    "schedule_cost",
 ]
 
 

@@ -15,16 +15,27 @@ study assembles library parts:
   :func:`reproduce`.
 """
 
-from .scenario import (
-    LABELS as LABELS,
-    METHODS as METHODS,
-    methods as methods,
-    scenario as scenario,
-)
+from .figures import figure_study as figure_study
 from .montecarlo import (
     DEFAULT_RUNS as DEFAULT_RUNS,
+)
+from .montecarlo import (
     VoVoStudy as VoVoStudy,
+)
+from .montecarlo import (
     run_study as run_study,
 )
-from .figures import figure_study as figure_study
-from .rows import paper_rows as paper_rows, reproduce as reproduce
+from .rows import paper_rows as paper_rows
+from .rows import reproduce as reproduce
+from .scenario import (
+    LABELS as LABELS,
+)
+from .scenario import (
+    METHODS as METHODS,
+)
+from .scenario import (
+    methods as methods,
+)
+from .scenario import (
+    scenario as scenario,
+)
