@@ -28,7 +28,8 @@ _spec.loader.exec_module(execute_notebooks)
 # runtime-bound (the PMBM's Murty loops), 108 -> 63 s wall (113 -> 77 CPU-s) at the default level,
 # cold cache, one process. The other notebooks are compile-bound and lose there
 # (multitarget_first_tracker 48 -> 56 s, schedule_design 38 -> 41 s).
-XLA_OPTIMIZED = {"maneuvering_imm.ipynb": "test_maneuvering.py", "williams15_rfs.ipynb": None}
+XLA_OPTIMIZED = {"maneuvering_imm.ipynb": "test_maneuvering.py", "particle_filters.ipynb": "test_tma_bounds.py",
+                 "williams15_rfs.ipynb": None}
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
