@@ -96,7 +96,7 @@ from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
 from ._base import AbstractMultiTargetFilter, Estimates, scan_ok
 from ._clutter import resolve_clutter
-from ._mixture import GaussianMixture, check_mixture
+from ._mixture import GaussianMixture, check_mixture, log_normalise
 from ._phd import _scalar
 from ._scenario import _positive_int
 
@@ -497,17 +497,9 @@ class AbstractLabelledFilter(AbstractMultiTargetFilter):
         kb = k_best_assignments(cost, K, offsets=offsets, valid_parents=state.hypothesis_active)
 
         ok = kb.valid
-        raw = jnp.where(ok, -kb.total_cost, -jnp.inf)
-        top = jnp.max(raw)
-        top_safe = jnp.where(jnp.isfinite(top), top, 0.0)
-        log_total = top_safe + jnp.log(jnp.sum(jnp.where(ok, jnp.exp(raw - top_safe), 0.0)))
-        log_w = jnp.where(ok, raw - log_total, -jnp.inf)
+        log_total, log_w = log_normalise(jnp.where(ok, -kb.total_cost, -jnp.inf), ok)
         active = ok & (log_w >= jnp.log(self.hypothesis_threshold.astype(dtype)))
-        # Renormalise over the hypotheses kept.
-        top = jnp.max(jnp.where(active, log_w, -jnp.inf))
-        top_safe = jnp.where(jnp.isfinite(top), top, 0.0)
-        log_w = jnp.where(active, log_w - top_safe
-                          - jnp.log(jnp.sum(jnp.where(active, jnp.exp(log_w - top_safe), 0.0))), -jnp.inf)
+        log_w = log_normalise(log_w, active)[1]  # renormalised over the hypotheses kept
 
         parent = jnp.maximum(kb.parent, 0)
         rc = kb.row_to_col  # (K, P)

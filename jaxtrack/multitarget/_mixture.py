@@ -257,3 +257,12 @@ def reject_unknown(cls: str, legacy: dict) -> None:
     if legacy:
         raise InputError(f"{cls} got unexpected keyword arguments {sorted(legacy)}.")
 
+
+def log_normalise(log_w: Array, mask: Array) -> tuple[Array, Array]:
+    """``(log Σ_mask exp(log_w), log_w − that)`` over the rows where ``mask`` is True (``−inf``
+    elsewhere): the normalisation of ranked hypotheses' log weights (PMBM, δ-GLMB), stable when the
+    largest is far from 0 and 0 (not NaN) when no row is in ``mask``."""
+    top = jnp.max(jnp.where(mask, log_w, -jnp.inf))
+    top_safe = jnp.where(jnp.isfinite(top), top, 0.0)
+    log_total = top_safe + jnp.log(jnp.sum(jnp.where(mask, jnp.exp(log_w - top_safe), 0.0)))
+    return log_total, jnp.where(mask, log_w - log_total, -jnp.inf)

@@ -61,6 +61,7 @@ from jaxtyping import Array, Float
 
 from .._validation import InputError, is_concrete
 from ..association._murty import k_best_assignments
+from ._mixture import log_normalise
 from ._multibernoulli import (
     AbstractGlobalHypotheses,
     AbstractMultiBernoulliFilter,
@@ -292,11 +293,7 @@ class RankedAssignment(AbstractGlobalHypotheses):
         mapped = jnp.where(rc < C, cols_c[jnp.clip(rc, 0, C - 1)], N + rows_c[jnp.clip(rc - C, 0, A - 1)])
         rtc = jnp.broadcast_to(N + jnp.arange(M), (H, M)).at[:, rows].set(mapped, mode="drop")
         ok = kb.valid
-        raw = jnp.where(ok, -kb.total_cost, -jnp.inf)
-        top = jnp.max(raw)
-        top_safe = jnp.where(jnp.isfinite(top), top, 0.0)
-        log_total = top_safe + jnp.log(jnp.sum(jnp.where(ok, jnp.exp(raw - top_safe), 0.0)))
-        log_w = jnp.where(ok, raw - log_total, -jnp.inf)
+        log_total, log_w = log_normalise(jnp.where(ok, -kb.total_cost, -jnp.inf), ok)
         hyp_active = ok & (log_w >= jnp.log(self.hypothesis_threshold.astype(dtype)))
         ppp_mass = jnp.sum(jnp.where(state.poisson_active, state.poisson_weights, 0.0))
         log_likelihood = log_total - f.prob_detect * ppp_mass
