@@ -65,10 +65,10 @@ demo: $(STAMP)
 # The suite runs as three pytest sessions, each on two worker processes (pytest-xdist, one per
 # core; XDIST= runs them in one process each): the two halves of the suite by file name, then the
 # fault-injection cases (JAX in worker threads, some ending in runtime errors raised from XLA
-# callbacks) with the property tests (many compilations) and the modules held to XLA's fusion
-# emitters' rounding (the multi-target contract, the square-root filters), at those emitters (JAXTRACK_TEST_FUSION_EMITTERS=1: the other sessions compile
-# with the former CPU emitters, in less than half the time; tests/conftest.py). Each test module is one work unit of a
-# worker, longest first (tests/conftest.py). XLA's CPU compiler has crashed (SIGSEGV inside
+# callbacks) with the property tests (many compilations). Every session compiles with XLA:CPU's
+# former emitters, in less than half the fusion emitters' time (tests/conftest.py); test-slow
+# also holds the multi-target contract to its reference bit for bit at the fusion emitters the
+# reference was computed with. Each test module is one work unit of a worker, longest first (tests/conftest.py). XLA's CPU compiler has crashed (SIGSEGV inside
 # backend_compile) twice late in a long single process (after ~500 tests, in an unremarkable
 # compilation; not reproducible alone), so no worker is left to accumulate the whole suite's
 # compilations (about 250 tests each here); tests/conftest.py also clears JAX's in-memory caches
@@ -82,7 +82,7 @@ demo: $(STAMP)
 # rerun once; a second failure fails make test.
 # Where the time goes: JAXTRACK_TEST_PROFILE=DIR make test, then python tools/suite_profile.py DIR
 # (per module: wall, XLA compile, trace seconds; about 80% of the suite is JAX compiling and tracing).
-ISOLATED := tests/test_faults.py tests/test_properties.py tests/test_multitarget_contract.py tests/test_square_root.py
+ISOLATED := tests/test_faults.py tests/test_properties.py
 SIGNALS  := tests/test_cli_robustness.py
 # tests/conftest.py compiles the suite with most of XLA's optimisations off (LLVM -O0; most modules
 # are compile-bound: 2301 -> 2163 worker-s), and the few runtime-bound modules (pytest.mark.
@@ -100,13 +100,14 @@ test: $(STAMP)
 	  $(BIN)/pytest $(PYTEST_ARGS) $(SIGNALS); }
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(FIRST)
 	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(SECOND)
-	JAXTRACK_TEST_FUSION_EMITTERS=1 $(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
+	$(BIN)/pytest $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
 	$(MAKE) docs
 
 test-slow: $(STAMP)
 	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(FIRST)
 	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(SECOND)
-	JAXTRACK_TEST_FUSION_EMITTERS=1 $(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
+	$(BIN)/pytest --runslow $(XDIST) $(PYTEST_ARGS) $(ISOLATED)
+	JAXTRACK_TEST_FUSION_EMITTERS=1 $(BIN)/pytest --runslow $(PYTEST_ARGS) tests/test_multitarget_contract.py
 	$(BIN)/pytest --runslow $(PYTEST_ARGS) $(SIGNALS)
 
 # statsmodels, the MLE oracle, on its 0.14 line as well as the locked version: installs 0.14.x

@@ -55,14 +55,14 @@ XLA_DEFAULT = os.environ.get("JAXTRACK_TEST_XLA_DEFAULT", "") == "1"
 # wall 53 -> 32 s). Process-wide (read when XLA's CPU backend starts), so set through the
 # environment and inherited like the variable above. The two emitters round differently where a
 # fusion's boundaries differ (e.g. 4e-17 absolute in a GM-PHD weight): only the multi-target
-# contract's bit-for-bit comparison with results computed before its refactor sees that, and the
-# square-root filters' equality with the Joseph filter on random models whose states grow to 1e9
-# over 1,000 steps (the two programs' last-bit differences grow to 2e-6 relative there; with the
-# fusion emitters their common mean arithmetic rounds alike, to 1e-12). Such a module marks itself
-# ``pytestmark = pytest.mark.fusion_emitters``: it is skipped, saying why, under the former
-# emitters, and runs in make test's last session with JAXTRACK_TEST_FUSION_EMITTERS=1
-# (tests/test_suite_levels.py holds the Makefile to that). An XLA without the flag would refuse
-# to start: a jaxlib update (make lock) runs the suite first.
+# contract's comparison with results computed before its refactor, with the fusion emitters, sees
+# that (it holds them bit for bit under JAXTRACK_TEST_FUSION_EMITTERS=1, `make test-slow`, and to
+# the last bits otherwise: tests/test_multitarget_contract.py). make test ran the modules held to
+# the fusion emitters in a session of its own until that comparison was made emitter-aware and the
+# square-root test's random models contracting (their states had grown to 9e18, so its innovations
+# compared rounding noise): that session, now at the former emitters, 116 -> 55 s and the contract
+# 90 -> 52 s, cold, one process. An XLA without the flag would refuse to start: a jaxlib update
+# (make lock) runs the suite first.
 LEGACY_EMITTERS_FLAG = "--xla_cpu_use_fusion_emitters=false"
 FUSION_EMITTERS = XLA_DEFAULT or os.environ.get("JAXTRACK_TEST_FUSION_EMITTERS", "") == "1"
 if not XLA_DEFAULT:
@@ -153,7 +153,7 @@ def pytest_addoption(parser):
 # runs before this file's, and then sends every test on its own, so a module fixture was built on
 # both workers and torn down between tests.)
 _LONG_FIRST = (
-    "test_notebooks", "test_performance_paths", "test_bearings_tma",
+    "test_notebooks", "test_multitarget_contract", "test_performance_paths", "test_bearings_tma",
     "test_multitarget_learning", "test_sharding", "test_design", "test_obem_registration",
     "test_particle_filter", "test_maneuvering", "test_properties", "test_sensors",
     "test_multitarget_study", "test_sensitivity", "test_calibration", "test_imm_fit",
@@ -193,13 +193,6 @@ def pytest_collection_modifyitems(config, items):
         order.setdefault(_work_unit(item.nodeid), i)
     # Stable: units keep their own test order; long units first, then collection order.
     items.sort(key=lambda it: (rank.get(it.path.stem, len(rank)), order[_work_unit(it.nodeid)]))
-    if not FUSION_EMITTERS:
-        # See LEGACY_EMITTERS_FLAG: these modules hold results to the fusion emitters' rounding.
-        emitters = pytest.mark.skip(reason="needs XLA's fusion emitters: run with JAXTRACK_TEST_FUSION_EMITTERS=1 "
-                                           "(make test's last session does)")
-        for item in items:
-            if item.get_closest_marker("fusion_emitters") is not None:
-                item.add_marker(emitters)
     if config.getoption("--runslow"):
         return
     skip = pytest.mark.skip(reason="slow: run with --runslow or JAXTRACK_RUNSLOW=1")

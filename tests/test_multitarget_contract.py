@@ -2,9 +2,11 @@
 
 - every family implements :class:`~jaxtrack.multitarget.AbstractMultiTargetFilter`, and
   :func:`~jaxtrack.multitarget.run_multitarget` gives the estimates of its own ``run_*``;
-- the families' runs and :func:`~jaxtrack.multitarget.multitarget_monte_carlo` equal, bit for bit,
-  what the pre-contract code gave (``tests/data/multitarget_contract.npz``, written by
-  ``tests/_multitarget_cases.py`` at 0847afe);
+- the families' runs and :func:`~jaxtrack.multitarget.multitarget_monte_carlo` equal what the
+  pre-contract code gave (``tests/data/multitarget_contract.npz``, written by
+  ``tests/_multitarget_cases.py`` at 0847afe): bit for bit with the XLA:CPU fusion emitters the
+  reference was computed with (``JAXTRACK_TEST_FUSION_EMITTERS=1``; ``make test-slow`` runs it so),
+  to the last bits of each array's magnitude with the former emitters ``make test`` compiles with;
 - the Monte Carlo keeps every run's GOSPA, exports, and an interrupted run hands back what finished.
 """
 
@@ -18,6 +20,7 @@ import numpy as np
 import pytest
 
 from _multitarget_cases import CUTOFF, MC_KEY, MC_RUNS, REFERENCE, RUN_KEY, _fields, methods, scenario
+from conftest import FUSION_EMITTERS
 from jaxtrack.multitarget import (
     AbstractMultiTargetFilter,
     MultiTargetMonteCarloResult,
@@ -32,9 +35,28 @@ from jaxtrack.multitarget import (
 
 RUNS = {"phd": run_phd, "cphd": run_cphd, "pmb": run_pmbm, "pmbm": run_pmbm, "jpda": run_tracker}
 
-# The reference was computed with XLA:CPU's fusion emitters, which the suite's first two sessions
-# do not use (tests/conftest.py): make test runs this module in its last session.
-pytestmark = pytest.mark.fusion_emitters
+# The reference was computed with XLA:CPU's fusion emitters; make test compiles with the former
+# emitters (tests/conftest.py), which fuse the same arithmetic differently: the same code then
+# differs in the last bits (measured: 2.0e-14 of an array's largest magnitude, the CPHD Monte
+# Carlo's localisation sums; 12 of the 16 tests still bit for bit). Held to 1e-13 of the magnitude
+# there (a real change of the numerics moves them by far more), bit for bit where the emitters are
+# the reference's (in a session of their own: 90 s cold against 52 s).
+LAST_BITS = 1e-13
+
+
+def _as_before(actual, desired, err_msg):
+    """The pre-contract value: bit for bit with the reference's emitters; otherwise integers,
+    booleans and which entries are finite exactly, the finite floats to ``LAST_BITS`` of the
+    array's largest magnitude."""
+    actual, desired = np.asarray(actual), np.asarray(desired)
+    if FUSION_EMITTERS or desired.dtype.kind != "f":
+        np.testing.assert_array_equal(actual, desired, err_msg=err_msg)
+        return
+    finite = np.isfinite(desired)
+    np.testing.assert_array_equal(np.isfinite(actual), finite, err_msg=err_msg)
+    np.testing.assert_array_equal(actual[~finite], desired[~finite], err_msg=err_msg)
+    scale = float(np.max(np.abs(desired[finite]), initial=0.0))
+    np.testing.assert_allclose(actual[finite], desired[finite], rtol=0, atol=LAST_BITS * scale, err_msg=err_msg)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -78,7 +100,7 @@ def _quiet(fn, *args, **kwargs):
 
 @pytest.mark.parametrize("name", ["phd", "cphd", "pmb", "pmbm", "jpda"])
 def test_every_family_runs_through_the_one_scan_as_before(case, reference, name):
-    """A family's ``run_*`` equals its pre-contract result bit for bit, and ``run_multitarget``
+    """A family's ``run_*`` equals its pre-contract result (:func:`_as_before`), and ``run_multitarget``
     reports the same estimates."""
     scen, methods, z, v = case
     method = methods[name]
@@ -87,7 +109,7 @@ def test_every_family_runs_through_the_one_scan_as_before(case, reference, name)
     keys = [k for k in reference if k.startswith(f"{name}/run/")]
     assert keys
     for key in keys:
-        np.testing.assert_array_equal(new[key.split("/", 2)[2]], reference[key], err_msg=key)
+        _as_before(new[key.split("/", 2)[2]], reference[key], err_msg=key)
     generic = _quiet(run_multitarget, method, z, v, warn=False)
     if name == "jpda":
         states, mask = reference["jpda/run/mean"], reference["jpda/run/status"] == 2
@@ -99,7 +121,7 @@ def test_every_family_runs_through_the_one_scan_as_before(case, reference, name)
         ids = (np.where(mask, np.arange(mask.shape[1]), -1) if pre else reference[f"{name}/run/estimate_id"])
     np.testing.assert_array_equal(np.asarray(generic.estimates.mask), mask)
     np.testing.assert_array_equal(np.asarray(generic.estimates.ids), ids)
-    np.testing.assert_array_equal(np.asarray(generic.estimates.states)[mask], states[mask])
+    _as_before(np.asarray(generic.estimates.states)[mask], states[mask], err_msg="estimates")
     assert bool(np.all(generic.ok))
 
 
@@ -112,7 +134,7 @@ def test_every_family_runs_through_the_one_monte_carlo_as_before(case, reference
     new["births_dropped"] = np.asarray(mc.capacity_events)
     keys = [k for k in reference if k.startswith(f"{name}/mc/")]
     for key in keys:
-        np.testing.assert_array_equal(new[key.split("/", 2)[2]], reference[key], err_msg=key)
+        _as_before(new[key.split("/", 2)[2]], reference[key], err_msg=key)
     # Every run's GOSPA is kept and averages to the mean (the sums are added block by block).
     assert mc.per_run_gospa.shape == (MC_RUNS, scen.num_steps)
     np.testing.assert_allclose(mc.per_run_gospa.mean(axis=0), mc.gospa, rtol=1e-13)
@@ -238,7 +260,7 @@ def _quiet_but_deprecation(fn, *args, **kwargs):
 
 
 def test_the_pmb_is_the_pmbm_with_a_marginal_projection(case, reference):
-    """``PMBM(..., hypotheses=MarginalProjection(associator))`` is the PMB, bit for bit (the PMB and
+    """``PMBM(..., hypotheses=MarginalProjection(associator))`` is the PMB as before (the PMB and
     PMBM share every step but the global-hypothesis strategy)."""
     from jaxtrack.multitarget import PMBM, MarginalProjection
 
@@ -250,4 +272,4 @@ def test_the_pmb_is_the_pmbm_with_a_marginal_projection(case, reference):
     assert as_pmbm.max_hypotheses == 1
     new = _fields(_quiet(run_pmbm, as_pmbm, z, v, warn=False))
     for key in (k for k in reference if k.startswith("pmb/run/")):
-        np.testing.assert_array_equal(new[key.split("/", 2)[2]], reference[key], err_msg=key)
+        _as_before(new[key.split("/", 2)[2]], reference[key], err_msg=key)

@@ -1,6 +1,6 @@
 """Square-root Kalman filter and square-root UKF (issue 19).
 
-float64: equal to the Joseph-form KalmanFilter / the UKF to 1e-10 over 1,000 steps (means,
+float64: equal to the Joseph-form KalmanFilter to 1e-12 / the UKF to 1e-10 over 1,000 steps (means,
 covariances, S, log-likelihood). float32, ill-conditioned (a 2-D constant-velocity target, prior
 σ 1 km, position measured to 1 mm): the Joseph filter's covariance turns singular at the second
 update and its ANEES leaves the 95% bounds by six orders of magnitude, while both square-root
@@ -27,11 +27,19 @@ from jaxtrack.montecarlo import chi2_mean_bounds, monte_carlo, simulate
 
 from helpers import assert_close, random_linear_model, simulate_linear
 
-# The float64 comparisons run on random models whose states grow to 1e9 over 1,000 steps: XLA's
-# former CPU emitters (the suite's first sessions, tests/conftest.py) round the two filters'
-# common mean arithmetic differently and the growth carries that to 2e-6 relative; make test
-# runs this module with the fusion emitters, as users compile.
-pytestmark = pytest.mark.fusion_emitters
+
+def _contracting(model: LinearGaussianModel, radius: float = 0.99) -> LinearGaussianModel:
+    """The random model with its transitions scaled to spectral radius ``radius`` (if larger).
+
+    A random ``expm(A τ)`` may grow (seed 0: |λ| 1.045, the states reach 9e18 in 1,000 steps):
+    the innovations are then differences of 1e18-sized numbers, their last bits depend on how
+    XLA fuses the mean arithmetic, not on the filter, and the comparison tests nothing. Scaled,
+    the states stay O(1) and every field is compared where its digits mean something."""
+    F = np.asarray(model.F)
+    rho = np.max(np.abs(np.linalg.eigvals(F)), axis=-1, keepdims=True)[..., None]
+    F = F * np.minimum(1.0, radius / rho)
+    return LinearGaussianModel(F, model.Q, model.H, model.R, model.initial_mean, model.initial_cov)
+
 
 FIELDS = ("filtered_mean", "filtered_cov", "predicted_mean", "predicted_cov", "innovation",
           "innovation_cov", "log_likelihood", "final_cov")
@@ -55,13 +63,15 @@ def _assert_factors(res):
 def test_square_root_kf_equals_joseph_kf_over_1000_steps(first_step):
     T = 1000
     rng = np.random.default_rng(0)
-    model = random_linear_model(rng, 4, 2, T, nonuniform_tau=False)
+    model = _contracting(random_linear_model(rng, 4, 2, T, nonuniform_tau=False))
     _, zs = simulate_linear(rng, model, T, first_step)
     mask = rng.uniform(size=(T, 2)) > 0.2
     ref = run_filter(KalmanFilter(), model, zs, mask=mask, first_step=first_step)
     res = run_filter(SquareRootKalmanFilter(), model, zs, mask=mask, first_step=first_step)
     assert bool(res.ok)
-    _assert_results_close(res, ref, 1e-10)  # measured: 8e-16 covariances, 3e-15 innovations
+    # Measured (either XLA:CPU emitter): 5e-16 of each field's magnitude (means, covariances,
+    # innovations, log-likelihood).
+    _assert_results_close(res, ref, 1e-12)
     _assert_factors(res)
     assert ref.filtered_cov_factor is None  # covariance filters keep their outputs unchanged
 
@@ -70,12 +80,12 @@ def test_square_root_kf_singular_process_noise_and_per_step_matrices():
     # Q = 0 (its factor is the semidefinite Cholesky factor 0) and per-step F, H, R.
     T = 200
     rng = np.random.default_rng(1)
-    base = random_linear_model(rng, 3, 2, T, per_step_measurement=True)
+    base = _contracting(random_linear_model(rng, 3, 2, T, per_step_measurement=True))
     model = LinearGaussianModel(base.F, np.zeros((3, 3)), base.H, base.R, base.initial_mean, base.initial_cov)
     _, zs = simulate_linear(rng, model, T)
     ref = run_filter(KalmanFilter(), model, zs)
     res = run_filter(SquareRootKalmanFilter(), model, zs)
-    _assert_results_close(res, ref, 1e-10)
+    _assert_results_close(res, ref, 1e-12)
 
 
 TAU = 1.0
