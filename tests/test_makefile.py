@@ -22,7 +22,8 @@ pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="needs make
 
 # The stand-in: `-c CODE` succeeds iff it claims >= 3.11 (the Makefile's only use of -c is the
 # version check); `--version` prints it; `-m venv DIR` makes DIR/bin/python as a copy of itself
-# (so the venv's python answers the same way); `-m pip ...` is logged and succeeds.
+# (so the venv's python answers the same way); `-m pip ...` is logged and succeeds, and a pip
+# install that names uv leaves the venv a bin/uv stand-in that logs its calls the same way.
 FAKE = """#!/bin/sh
 LOG="{log}"
 case "$1" in
@@ -31,6 +32,8 @@ case "$1" in
   -m)
     if [ "$2" = venv ]; then mkdir -p "$3/bin" && cp "$0" "$3/bin/python" && echo "venv $3" >> "$LOG";
     elif [ "$2" = pip ]; then shift 2; echo "pip $*" >> "$LOG";
+      case " $* " in *" uv "*)
+        printf '#!/bin/sh\necho "uv $*" >> "%s"\n' "$LOG" > "$(dirname "$0")/uv"; chmod +x "$(dirname "$0")/uv" ;; esac
     else exit 3; fi ;;
   *) exit 3 ;;
 esac
@@ -77,10 +80,12 @@ def test_half_made_venv_is_remade(work, tmp_path):
     assert not (work / ".venv" / "leftover").exists()
     assert (work / ".venv" / ".installed").exists()
     calls = (tmp_path / "calls.log").read_text().splitlines()
-    assert calls[0] == "venv .venv" and calls[-1] == "pip install --quiet -c requirements.lock -e .[test,notebooks,docs,export]"
-    # Every pip install is constrained by the lock file (pip's own upgrade too).
-    installs = [c for c in calls if c.startswith("pip install")]
+    assert calls[0] == "venv .venv"
+    assert calls[-1] == "uv pip install --quiet --python .venv/bin/python -c requirements.lock -e .[test,notebooks,docs,export]"
+    # Every install is constrained by the lock file (pip's own upgrade and uv's too).
+    installs = [c for c in calls if " install " in f" {c} "]
     assert len(installs) == 2 and all("-c requirements.lock" in c for c in installs), installs
+    assert installs[0].startswith("pip install") and " uv " in f"{installs[0]} "
 
 
 def test_venv_of_an_old_python_is_remade(work, tmp_path):
@@ -111,7 +116,7 @@ def test_a_changed_lock_file_reinstalls(work, tmp_path):
     os.utime(work / "pyproject.toml", (0, 0))
     p = _make(work, py)
     assert p.returncode == 0, p.stderr
-    assert "pip install --quiet -c requirements.lock" in (tmp_path / "calls.log").read_text()
+    assert "uv pip install --quiet --python .venv/bin/python -c requirements.lock" in (tmp_path / "calls.log").read_text()
 
 
 def _requirement_names(specs):
@@ -137,4 +142,4 @@ def test_the_lock_pins_every_dependency_of_pyproject():
             pins[name.lower().replace("_", "-")] = version
     assert not wanted - set(pins), f"not pinned in requirements.lock: {sorted(wanted - set(pins))}"
     # The installer itself and the test oracles are pinned too.
-    assert {"pip", "setuptools", "jax", "jaxlib", "numpy", "scipy", "statsmodels"} <= set(pins)
+    assert {"pip", "uv", "setuptools", "jax", "jaxlib", "numpy", "scipy", "statsmodels"} <= set(pins)
