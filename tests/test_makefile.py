@@ -81,7 +81,7 @@ def test_half_made_venv_is_remade(work, tmp_path):
     assert (work / ".venv" / ".installed").exists()
     calls = (tmp_path / "calls.log").read_text().splitlines()
     assert calls[0] == "venv .venv"
-    assert calls[-1] == "uv pip install --quiet --python .venv/bin/python -c requirements.lock -e .[test,notebooks,docs,export]"
+    assert calls[-1] == "uv pip install --quiet --compile-bytecode --python .venv/bin/python -c requirements.lock -e .[test,notebooks,docs,export]"
     # Every install is constrained by the lock file (pip's own upgrade and uv's too).
     installs = [c for c in calls if " install " in f" {c} "]
     assert len(installs) == 2 and all("-c requirements.lock" in c for c in installs), installs
@@ -116,7 +116,7 @@ def test_a_changed_lock_file_reinstalls(work, tmp_path):
     os.utime(work / "pyproject.toml", (0, 0))
     p = _make(work, py)
     assert p.returncode == 0, p.stderr
-    assert "uv pip install --quiet --python .venv/bin/python -c requirements.lock" in (tmp_path / "calls.log").read_text()
+    assert "uv pip install --quiet --compile-bytecode --python .venv/bin/python -c requirements.lock" in (tmp_path / "calls.log").read_text()
 
 
 def _requirement_names(specs):
