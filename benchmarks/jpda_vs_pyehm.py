@@ -83,17 +83,17 @@ def make_scan(rng, T, M, side, dense=False):
 
 
 def _floors():
-    """Jitted functions with ``JPDA``'s five outputs that do (almost) nothing: under and over
+    """Jitted functions with ``JPDA``'s six outputs that do (almost) nothing: under and over
     the 1000 flops below which XLA's CPU client runs a call inline."""
 
     def cheap(L):
-        return Association(L * 2.0, L[0, 1:], L[0, 0], L[-1, 0], L[0, 0] > 0)
+        return Association(L * 2.0, L[0, 1:], L[0, 0], L[-1, 0], L[0, 0] > 0, L[0, 0] < 0)
 
     def over(L):
         x = L
         for _ in range(1000 // L.size + 2):
             x = x * 0.999 + 0.5  # fused into one loop: about as cheap, counted as > 1000 flops
-        return Association(x, L[0, 1:], L[0, 0], L[-1, 0], L[0, 0] > 0)
+        return Association(x, L[0, 1:], L[0, 0], L[-1, 0], L[0, 0] > 0, L[0, 0] < 0)
 
     return jax.jit(cheap), jax.jit(over)
 
@@ -158,7 +158,11 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="also append the table to this file")
     ap.add_argument("--cpu", type=int, default=None, help="pin the process to this core")
+    ap.add_argument("--sync-dispatch", action="store_true",
+                    help="run every jitted call on the caller's thread (jax_cpu_enable_async_dispatch=False)")
     a = ap.parse_args(argv)
+    if a.sync_dispatch:
+        jax.config.update("jax_cpu_enable_async_dispatch", False)
     if a.cpu is not None:
         os.sched_setaffinity(0, {a.cpu})  # before JAX's first computation starts its threads
     load = os.getloadavg()[0]
@@ -170,6 +174,7 @@ def main(argv=None):
         (f"jpda_vs_pyehm: float64, {os.cpu_count()} cores ({platform.processor() or platform.machine()}), "
          f"load {load:.1f} before the run, {a.batch} scans per case, median of {a.repeats} interleaved rounds"
          + (f", pinned to core {a.cpu}" if a.cpu is not None else ", not pinned")
+         + (", synchronous dispatch (jax_cpu_enable_async_dispatch=False)" if a.sync_dispatch else "")
          + f"; jaxtrack from {where}"),
         "µs per scan; ratios = jaxtrack / EHM2 (below 1: jaxtrack faster); floors: a jitted call with JPDA's five",
         "outputs doing nothing, inline (< 1000 flops) and on XLA's worker thread (>= 1000 flops, as a real JPDA call)",
