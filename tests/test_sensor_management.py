@@ -193,6 +193,27 @@ def test_incremental_local_search_equals_full_evaluation(which):
         np.testing.assert_allclose(float(np.asarray(J)[r]), ref_J, rtol=1e-13)
 
 
+def test_screened_local_search_stops_at_a_local_optimum_of_the_full_neighbourhood():
+    """The screened search prices only a few exchanges per iteration, so its path may differ from
+    the best-improvement one; where it stops, costing every neighbour in full (the NumPy-built
+    neighbours of _full_evaluation_search) must find no improving move, and its J must be the
+    schedule's exact cost."""
+    from jaxtrack.design._schedule_search import _screened_polish
+
+    _, problem = two_sensors()
+    T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
+    starts = np.random.default_rng(5).integers(0, N, (4, T, S)).astype(np.int32)
+    schedules, J, moves, still = _screened_polish(problem, jnp.asarray(starts), jnp.asarray(T * S * N, jnp.int32),
+                                                  jnp.asarray(1e-12), k=2)
+    assert np.sum(np.asarray(moves)) > 0 and not np.any(np.asarray(still))
+    schedules = np.asarray(schedules)
+    np.testing.assert_allclose(np.asarray(J), numpy_costs(problem, schedules), rtol=1e-12)
+    for r in range(len(starts)):
+        _, ref_J, ref_moves = _full_evaluation_search(problem, schedules[r])
+        assert ref_moves == 0
+        np.testing.assert_allclose(ref_J, float(np.asarray(J)[r]), rtol=1e-13)
+
+
 def _central_difference(f, x, direction, h):
     return (f(x + h * direction) - f(x - h * direction)) / (2 * h)
 
@@ -291,6 +312,8 @@ def _model(**kw):
         (lambda: relaxed_sensor_schedule(small()[1], init=np.zeros((T_SMALL, 2))), "init"),
         (lambda: relaxed_sensor_schedule(small()[1], max_moves=0), "max_moves"),
         (lambda: relaxed_sensor_schedule(small()[1], settle=1.5), "settle"),
+        (lambda: relaxed_sensor_schedule(small()[1], exchanges=0), "exchanges"),
+        (lambda: relaxed_sensor_schedule(small()[1], exchanges=2.0), "exchanges"),
         (lambda: greedy_sensor_schedule(None), "problem"),
     ],
 )

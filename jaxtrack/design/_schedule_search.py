@@ -5,7 +5,9 @@ The cost ``J = Σ_i c_i(looks of target i)`` is a sum over targets, and a move c
 most two targets, so only those are recomputed: per iteration one table of every target's cost with
 one scan's looks changed prices every single-scan move, and an exchange of two looks reruns its two
 targets. The moves, their order and the accepted schedule are those of a full evaluation of every
-neighbour (tests/test_sensor_management.py holds the two equal). The problem and its costs live in
+neighbour (tests/test_sensor_management.py holds the two equal). The screened variant
+(:func:`_screened_polish`) costs every single move but only the exchanges its estimate ranks best,
+and certifies its stop by one full evaluation. The problem and its costs live in
 :mod:`._sensor_management`.
 """
 
@@ -95,6 +97,37 @@ def _swap_pairs(num_scans: int, num_sensors: int) -> tuple[np.ndarray, np.ndarra
     return p[keep].astype(np.int32), q[keep].astype(np.int32)
 
 
+def _single_table(problem: SensorSchedulingProblem, factors: Array, schedule: Array) -> tuple[Array, Array]:
+    """``D[i, k, m]`` ``(N, T, 2^S)``: target ``i``'s ``J_i`` with row ``k`` of its looks set to the
+    sensor subset ``m``, the other rows as in ``schedule`` (``N·T·2^S`` one-target recursions), and
+    the rows themselves ``(N, T)`` (:func:`_subsets_of`)."""
+    T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
+    rows = jax.vmap(lambda i: _subsets_of(schedule, i))(jnp.arange(N))  # (N, T)
+
+    def table_entry(i, k, m):
+        return _target_cost(problem, factors, i, rows[i].at[k].set(m))
+
+    i, k, m = (jnp.asarray(a.ravel(), jnp.int32)
+               for a in np.meshgrid(np.arange(N), np.arange(T), np.arange(2**S), indexing="ij"))
+    D = jax.lax.map(lambda x: table_entry(*x), (i, k, m), batch_size=_CHUNK).reshape(N, T, 2**S)
+    return D, rows
+
+
+def _single_costs(problem: SensorSchedulingProblem, D: Array, rows: Array) -> tuple[Array, Array]:
+    """From the table of :func:`_single_table`: the cost of every single move ``(T, N^S)`` (each
+    scan's joint look replaced by each joint look, :func:`_configurations` order) and the current
+    ``J_i`` ``(N,)``."""
+    T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
+    targets = jnp.arange(N)
+    # Row subset each target gets under each joint look: bit s set when sensor s looks at it.
+    configs = _configurations(N, S)
+    subset_of = jnp.asarray(((configs[:, :, None] == np.arange(N)) * (2 ** np.arange(S))[None, :, None]).sum(1),
+                            jnp.int32)  # (N^S, N)
+    singles = jnp.sum(D[targets[None, None, :], jnp.arange(T)[:, None, None], subset_of[None]], axis=-1)
+    # The current J_i: row 0 set to the subset it already has.
+    return singles, D[targets, 0, rows[:, 0]]
+
+
 def _move_costs(problem: SensorSchedulingProblem, factors: Array, schedule: Array) -> tuple[Array, Array, Array]:
     r"""The exact cost of every neighbour of ``schedule`` ``(T, S)``, recomputing only the targets a
     move changes.
@@ -115,24 +148,10 @@ def _move_costs(problem: SensorSchedulingProblem, factors: Array, schedule: Arra
     (the current joint look among them), of the exchanges of :func:`_swap_pairs` and the current
     ``J_i``.
     """
-    T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
+    T, S = problem.num_scans, problem.num_sensors
     dtype = problem.initial_cov.dtype
-    targets = jnp.arange(N)
-    rows = jax.vmap(lambda i: _subsets_of(schedule, i))(targets)  # (N, T)
-
-    def table_entry(i, k, m):
-        return _target_cost(problem, factors, i, rows[i].at[k].set(m))
-
-    i, k, m = (jnp.asarray(a.ravel(), jnp.int32)
-               for a in np.meshgrid(np.arange(N), np.arange(T), np.arange(2**S), indexing="ij"))
-    D = jax.lax.map(lambda x: table_entry(*x), (i, k, m), batch_size=_CHUNK).reshape(N, T, 2**S)
-    # Row subset each target gets under each joint look: bit s set when sensor s looks at it.
-    configs = _configurations(N, S)
-    subset_of = jnp.asarray(((configs[:, :, None] == np.arange(N)) * (2 ** np.arange(S))[None, :, None]).sum(1),
-                            jnp.int32)  # (N^S, N)
-    singles = jnp.sum(D[targets[None, None, :], jnp.arange(T)[:, None, None], subset_of[None]], axis=-1)
-    # The current J_i: row 0 set to the subset it already has.
-    per_target = D[targets, 0, rows[:, 0]]
+    D, rows = _single_table(problem, factors, schedule)
+    singles, per_target = _single_costs(problem, D, rows)
 
     flat = schedule.reshape(T * S)
     p, q = (jnp.asarray(a) for a in _swap_pairs(T, S))
@@ -203,3 +222,100 @@ def _polish(problem, schedules, max_iter, rtol):
     """:func:`_polish_one` of each start ``(R, T, S)`` (a batched ``while_loop`` freezes each start
     once its own search has stopped)."""
     return jax.vmap(_polish_one, in_axes=(None, 0, None, None))(problem, schedules, max_iter, rtol)
+
+
+def _exchange_estimates(problem: SensorSchedulingProblem, D: Array, rows: Array, per_target: Array,
+                        schedule: Array) -> Array:
+    r"""The cost of every exchange of :func:`_swap_pairs` estimated from the single-move table
+    ``D`` (:func:`_single_table`): exchanging the looks at ``(k, s)`` (target ``a``) and ``(l, s')``
+    (target ``b``) changes two rows of ``a`` and two of ``b``, and each row's change alone is priced
+    exactly by ``D``; the estimate adds the four changes, leaving out only how the two changes of
+    one target interact (``(P,)``, ``+∞`` for an exchange of a target with itself)."""
+    T, S = schedule.shape
+    flat = schedule.reshape(T * S)
+    p, q = (jnp.asarray(x) for x in _swap_pairs(T, S))
+    a, b = flat[p], flat[q]
+    k, s = jnp.divmod(p, S)
+    l, t = jnp.divmod(q, S)
+    bit_s, bit_t = 2**s, 2**t
+
+    def change(i, row, subset):
+        return D[i, row, subset] - per_target[i]
+
+    est = (jnp.sum(per_target)
+           + change(a, k, rows[a, k] & ~bit_s) + change(a, l, rows[a, l] | bit_t)
+           + change(b, l, rows[b, l] & ~bit_t) + change(b, k, rows[b, k] | bit_s))
+    return jnp.where(a == b, jnp.inf, est)
+
+
+def _screened_polish_one(problem, schedule, max_iter, rtol, k):
+    """The local search of :func:`_polish_one` with the same neighbourhood and stopping rule and
+    cheaper iterations: every single move is costed exactly from the table (:func:`_single_table`),
+    but of the ``TS(TS − S)/2`` exchanges only the ``k`` best by their estimate
+    (:func:`_exchange_estimates`, two recursions each); the cheapest of these is taken while it
+    improves. When none does, one full evaluation (:func:`_move_costs`) looks for an exchange the
+    estimate misranked, takes it and the screened search goes on. It stops where the full evaluation
+    finds no improving move: at a local optimum of the same neighbourhood, though not necessarily the
+    one the best-improvement path reaches."""
+
+    factors = _subset_factors(problem)
+    T, S = schedule.shape
+    num_single = T * problem.num_targets**S
+    p_all, q_all = (jnp.asarray(x) for x in _swap_pairs(T, S))
+    k = min(k, int(p_all.size))
+
+    def screened_step(carry):
+        schedule, J, moves, _ = carry
+        D, rows = _single_table(problem, factors, schedule)
+        singles, current = _single_costs(problem, D, rows)
+        if k:
+            _, idx = jax.lax.top_k(-_exchange_estimates(problem, D, rows, current, schedule), k)
+            flat = schedule.reshape(T * S)
+
+            def exact(p, q):
+                a, b = flat[p], flat[q]
+                trial = flat.at[p].set(b).at[q].set(a).reshape(T, S)
+                ca = _target_cost(problem, factors, a, _subsets_of(trial, a))
+                cb = _target_cost(problem, factors, b, _subsets_of(trial, b))
+                return jnp.where(a == b, jnp.inf, jnp.sum(current.at[a].set(ca).at[b].set(cb)))
+
+            swaps = jax.vmap(exact)(p_all[idx], q_all[idx])
+            costs = jnp.concatenate([singles.ravel(), swaps])
+            move_of = jnp.concatenate([jnp.arange(num_single, dtype=jnp.int32), num_single + idx.astype(jnp.int32)])
+        else:
+            costs = singles.ravel()
+            move_of = jnp.arange(num_single, dtype=jnp.int32)
+        best = jnp.argmin(costs)
+        improved = costs[best] < J - rtol * jnp.abs(J)
+        return (jnp.where(improved, _apply_move(problem, schedule, move_of[best]), schedule),
+                jnp.where(improved, costs[best], J), moves + improved.astype(moves.dtype), improved)
+
+    def full_costs(schedule):
+        singles, swaps, _ = _move_costs(problem, factors, schedule)
+        return jnp.concatenate([singles.ravel(), swaps])
+
+    def can_move(carry):
+        return carry[3] & (carry[2] < max_iter)
+
+    def outer_step(carry):
+        schedule, J, moves, _ = carry
+        schedule, J, moves, _ = jax.lax.while_loop(can_move, screened_step, (schedule, J, moves, jnp.asarray(True)))
+        costs = full_costs(schedule)
+        best = jnp.argmin(costs)
+        improved = (costs[best] < J - rtol * jnp.abs(J)) & (moves < max_iter)
+        return (jnp.where(improved, _apply_move(problem, schedule, best), schedule),
+                jnp.where(improved, costs[best], J), moves + improved.astype(moves.dtype), improved)
+
+    J0 = jnp.sum(jax.vmap(lambda i: _target_cost(problem, factors, i, _subsets_of(schedule, i)))(
+        jnp.arange(problem.num_targets)))
+    schedule, J, moves, _ = jax.lax.while_loop(
+        can_move, outer_step, (schedule, J0, jnp.asarray(0, jnp.int32), jnp.asarray(True)))
+    still = jnp.min(full_costs(schedule)) < J - rtol * jnp.abs(J)
+    return schedule, J, moves, still
+
+
+@eqx.filter_jit
+def _screened_polish(problem, schedules, max_iter, rtol, k: int):
+    """:func:`_screened_polish_one` of each start ``(R, T, S)``, ``k`` exchanges costed per iteration
+    (a Python int: static)."""
+    return jax.vmap(_screened_polish_one, in_axes=(None, 0, None, None, None))(problem, schedules, max_iter, rtol, k)

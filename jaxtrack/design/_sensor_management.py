@@ -55,6 +55,7 @@ At a one-hot ``w`` this is the Kalman filter's covariance recursion exactly.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -75,7 +76,7 @@ from .._validation import (
 )
 from ..filters._linalg import cholesky_and_inverse, matmul
 from ..models import LinearGaussianModel
-from ._schedule_search import _configurations, _polish
+from ._schedule_search import _configurations, _polish, _screened_polish
 from ._schedules import NotConvergedWarning
 
 __all__ = [
@@ -504,6 +505,7 @@ def relaxed_sensor_schedule(
     init: ArrayLike | None = None,
     max_moves: int | None = None,
     settle: float = 0.9,
+    exchanges: int | None = None,
 ) -> SensorScheduleDesign:
     r"""Non-myopic sensor schedule by gradient: relaxed looks over the whole horizon, Adam with an
     annealed entropy term, rounding and a local search.
@@ -559,12 +561,24 @@ def relaxed_sensor_schedule(
     - ``max_moves``: the most local-search moves per start (default ``T·S·N``).
     - ``settle``: the relaxation has settled when every look's largest weight is at least
       ``settle`` (in ``(0, 1]``); otherwise a :class:`NotConvergedWarning` says so.
+    - ``exchanges``: ``None`` (default) prices every exchange at every iteration (the
+      best-improvement path above); a positive int ``k`` screens them: each iteration prices every
+      single move exactly and only the ``k`` exchanges whose estimate from the single-move table is
+      best (each of the four rows an exchange changes priced alone, their interaction left out),
+      and where none of these improves, one full evaluation takes an exchange the estimate missed
+      or certifies the stop. The result is a local optimum of the same neighbourhood, reached by
+      another path. Measured (``benchmarks/measured/sensor_management.txt``, 8 targets, 40 scans,
+      2 shared cores): with 3 sensors the default takes 19.4 s (``J`` 2.58 % below greedy) and
+      ``exchanges=32, starts=1`` 2.1 s (1.46 % below), Stone Soup's brute force 12.2 s; with 4
+      sensors (4096 joint looks a scan for the brute force) ``exchanges=32, starts=1`` takes 3.6 s
+      (7.8 % below greedy) against Stone Soup's 128 s; with 1 sensor and 5 targets it takes 0.44 s
+      against Stone Soup's 0.12 s.
 
     **Returns:** :class:`SensorScheduleDesign`.
 
     **Raises:** :class:`~jaxtrack.InputError` naming the argument (``steps < 1``, a non-positive
-    ``learning_rate``, a bad ``entropy_weight``, ``starts``, ``init``, ``max_moves`` or
-    ``settle``). Issues :class:`NotConvergedWarning` when the chosen start's weights did not
+    ``learning_rate``, a bad ``entropy_weight``, ``starts``, ``init``, ``max_moves``, ``settle``
+    or ``exchanges``). Issues :class:`NotConvergedWarning` when the chosen start's weights did not
     settle toward one-hot (the rounding then decided more than the gradient did: give more
     ``steps`` or a larger final ``entropy_weight``) or when its local search was still improving
     at ``max_moves``.
@@ -587,6 +601,7 @@ def relaxed_sensor_schedule(
         raise InputError(f"`settle` must be in (0, 1]; got {settle}.")
     T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
     max_moves = T * S * N if max_moves is None else _positive_int("max_moves", max_moves)
+    exchanges = None if exchanges is None else _positive_int("exchanges", exchanges)
     dtype = problem.initial_cov.dtype
     if init is None:
         first = jnp.zeros((T, S, N), dtype)
@@ -608,8 +623,9 @@ def relaxed_sensor_schedule(
         raise InputError("the relaxed design gave non-finite weights; lower `learning_rate` or check the "
                          "problem's scales (e.g. covariances in m², not km²).")
     rounded = jnp.asarray(np.argmax(w, axis=-1), jnp.int32)
-    schedules, J, moves, still = _polish(problem, rounded, jnp.asarray(max_moves, jnp.int32),
-                                         jnp.asarray(1e-12, dtype))
+    search = _polish if exchanges is None else functools.partial(_screened_polish, k=exchanges)
+    schedules, J, moves, still = search(problem, rounded, jnp.asarray(max_moves, jnp.int32),
+                                        jnp.asarray(1e-12, dtype))
     J = np.asarray(J)
     best = int(np.argmin(J))
     peak = w[best].max(axis=-1)
