@@ -10,6 +10,8 @@ strategy object:
 - ``_gating``: :func:`gate_threshold` (χ² gates), :func:`measurement_likelihoods` (any filter's
   update on every measurement of a scan), :func:`log_likelihood_ratios` (the matrix ``L``);
 - ``_assignment``: :func:`linear_assignment` (2-D assignment) and :class:`GNN`;
+- ``_track_to_track``: :func:`track_to_track_assignment` (two trackers' tracks paired on
+  Bar-Shalom's statistical distance, for track-to-track fusion) and :class:`TrackToTrackAssignment`;
 - ``_murty``: :func:`k_best_assignments` (Murty's k best assignments over several cost matrices);
 - ``_jpda``: :class:`PDA`, :class:`JPDA` (exact marginals), :class:`LoopyBP` (belief propagation);
 - ``_pda_update``: :func:`pda_update`, the PDA/JPDA mixture collapse of the conditioned moments.
@@ -27,6 +29,10 @@ from ._gating import (
 from ._assignment import (
     GNN as GNN,
     linear_assignment as linear_assignment,
+)
+from ._track_to_track import (
+    TrackToTrackAssignment as TrackToTrackAssignment,
+    track_to_track_assignment as track_to_track_assignment,
 )
 from ._murty import (
     KBestAssignments as KBestAssignments,
@@ -47,6 +53,8 @@ __all__ = [
     "measurement_likelihoods",
     "GNN",
     "linear_assignment",
+    "track_to_track_assignment",
+    "TrackToTrackAssignment",
     "KBestAssignments",
     "k_best_assignments",
     "JPDA",
