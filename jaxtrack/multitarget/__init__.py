@@ -1,7 +1,8 @@
 """Multi-target tracking: scenarios with births, deaths, detection probability and Poisson clutter;
 the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step and one scan.
 
-- ``_scenario``: :class:`Scenario`, :func:`simulate_scenario` / :func:`simulate_scenarios` (padded
+- ``_scenario``: :class:`Scenario` (an :class:`AbstractScenario`, what the Monte Carlo
+  simulates), :func:`simulate_scenario` / :func:`simulate_scenarios` (padded
   scans with validity masks and the origin of every measurement; the truth drawn per run, or
   fixed over the runs with ``truth_states``);
 - ``_named_scenarios``: :func:`crossing_targets` (the library's crossing targets before a
@@ -33,6 +34,11 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
   Vo, Vo & Hoang 2017: Murty's ranked assignment over all prior hypotheses, fixed track and
   hypothesis budgets) and :class:`LMB` (Reuter et al. 2014: the same step projected to an LMB),
   the projection strategies :class:`DeltaGLMB`, :class:`LMBProjection`, :class:`GLMBState`;
+- ``_two_sensors``: :class:`TwoSensorScenario`, :func:`simulate_two_sensors` (the same targets
+  seen by two sensors, the scans stacked ``(T, 2, M, m)``), :class:`TwoSensorTrajectory`;
+- ``_track_fusion``: :class:`TrackFusionTracker` (two local trackers, one per sensor, and a fusion
+  centre: track-to-track association, a :mod:`jaxtrack.fusion` rule, fused identities in a
+  fixed-capacity :class:`FusedTable`), :class:`TrackFusionState`, :class:`TrackFusionStepInfo`;
 - ``_learning``: :func:`fit_detection_and_clutter` (``P_D`` and the clutter density by maximum
   likelihood of the tracker's scan log-likelihood, with standard errors).
 """
@@ -109,6 +115,18 @@ from ._glmb import (
     GLMBStepInfo as GLMBStepInfo,
     LMBProjection as LMBProjection,
 )
+from ._scenario import AbstractScenario as AbstractScenario
+from ._two_sensors import (
+    TwoSensorScenario as TwoSensorScenario,
+    TwoSensorTrajectory as TwoSensorTrajectory,
+    simulate_two_sensors as simulate_two_sensors,
+)
+from ._track_fusion import (
+    FusedTable as FusedTable,
+    TrackFusionState as TrackFusionState,
+    TrackFusionStepInfo as TrackFusionStepInfo,
+    TrackFusionTracker as TrackFusionTracker,
+)
 from ._tracker import (
     CONFIRMED as CONFIRMED,
     EMPTY as EMPTY,
@@ -124,6 +142,14 @@ from ._tracker import (
 )
 
 __all__ = [
+    "AbstractScenario",
+    "TwoSensorScenario",
+    "TwoSensorTrajectory",
+    "simulate_two_sensors",
+    "TrackFusionTracker",
+    "TrackFusionState",
+    "TrackFusionStepInfo",
+    "FusedTable",
     "CLUTTER",
     "PADDING",
     "CapacityWarning",

@@ -91,6 +91,21 @@ class AbstractMultiTargetFilter(eqx.Module):
     def capacity_events(self, state: Any) -> Int[Array, ""]:
         """Everything a static capacity refused so far, summed over the run (``()`` int32)."""
 
+    @property
+    def scan_sensors(self) -> tuple[int, ...]:
+        """The axes of one scan before its ``M`` measurement slots: ``()`` for one sensor (a scan
+        is ``(M, m)``, every family but the two-sensor fusion), ``(2,)`` for
+        :class:`~jaxtrack.multitarget.TrackFusionTracker` (a scan is ``(2, M, m)``, both sensors
+        stacked). :func:`run_multitarget` and the Monte Carlo check scans against it; declared by
+        the method, so that neither dispatches on its class."""
+        return ()
+
+    @property
+    def scan_meas_dim(self) -> int:
+        """``m``, the width of a scan's measurement rows (the model's ``meas_dim`` for one sensor;
+        the wider sensor's for stacked sensors, whose narrower rows are padded)."""
+        return self.model.meas_dim
+
     def capacity_message(self, events: int) -> str:
         """What to tell a user on the host when ``events`` capacity events happened (which
         capacities to raise). Families override it with their own capacities' names."""
@@ -124,25 +139,32 @@ def check_method(method, name: str = "method") -> None:
         )
 
 
-def check_scans(measurements, valid, meas_dim: int) -> tuple[Array, Array]:
-    """``(measurements (T, M, m), valid (T, M))`` as arrays, or :class:`~jaxtrack.InputError`
-    naming the bad one: shapes, the model's ``m``, a boolean mask, and (when concrete) finite
-    values wherever ``valid`` is True (a NaN or inf marked valid would be tracked as a number)."""
+def check_scans(measurements, valid, meas_dim: int, sensors: tuple[int, ...] = ()) -> tuple[Array, Array]:
+    """``(measurements (T, *sensors, M, m), valid (T, *sensors, M))`` as arrays, or
+    :class:`~jaxtrack.InputError` naming the bad one: shapes, the model's ``m``, a boolean mask, and
+    (when concrete) finite values wherever ``valid`` is True (a NaN or inf marked valid would be
+    tracked as a number). ``sensors`` is the method's :attr:`~AbstractMultiTargetFilter.scan_sensors`
+    (``()``: one sensor, ``(T, M, m)``)."""
     measurements = jnp.asarray(measurements)
     valid = jnp.asarray(valid)
-    if measurements.ndim != 3:
-        raise InputError(f"`measurements` must be (T, M, m); got shape {measurements.shape}.")
+    sensors = tuple(sensors)
+    axes = "".join(f"{s}, " for s in sensors)
+    if measurements.ndim != 3 + len(sensors) or measurements.shape[1:1 + len(sensors)] != sensors:
+        raise InputError(f"`measurements` must be (T, {axes}M, m); got shape {measurements.shape}.")
     if measurements.shape[-1] != meas_dim:
         raise InputError(f"`measurements` have {measurements.shape[-1]} components; the model measures {meas_dim}.")
-    if valid.shape != measurements.shape[:2] or valid.dtype != bool:
-        raise InputError(f"`valid` must be boolean (T, M) = {measurements.shape[:2]}; got {valid.dtype} {valid.shape}.")
+    if valid.shape != measurements.shape[:-1] or valid.dtype != bool:
+        raise InputError(f"`valid` must be boolean (T, {axes}M) = {measurements.shape[:-1]}; got {valid.dtype} "
+                         f"{valid.shape}.")
     if is_concrete(measurements) and is_concrete(valid):
         bad = np.asarray(valid) & ~np.all(np.isfinite(np.asarray(measurements)), axis=-1)
         if np.any(bad):
-            k, j = (int(i) for i in np.argwhere(bad)[0])
+            where = tuple(int(i) for i in np.argwhere(bad)[0])
+            k, j = where[0], where[-1]
+            sensor = f"sensor {where[1]}, " if sensors else ""
             raise InputError(
-                f"`measurements` hold {int(bad.sum())} non-finite values marked valid (first: scan {k}, slot {j}: "
-                f"{np.asarray(measurements)[k, j].tolist()}); mark them invalid in `valid` or remove them."
+                f"`measurements` hold {int(bad.sum())} non-finite values marked valid (first: scan {k}, {sensor}slot {j}: "
+                f"{np.asarray(measurements)[where].tolist()}); mark them invalid in `valid` or remove them."
             )
     return measurements, valid
 
@@ -209,7 +231,9 @@ def run_multitarget(
       :class:`~jaxtrack.multitarget.PMB`, :class:`~jaxtrack.multitarget.PMBM`,
       :class:`~jaxtrack.multitarget.GLMB`, :class:`~jaxtrack.multitarget.LMB`, or your own).
     - ``measurements``: ``(T, M, m)`` padded scans in the sensor's units (padding may be NaN);
-      ``valid``: boolean ``(T, M)``, False for padding (a scenario's ``trajectory.scans``).
+      ``valid``: boolean ``(T, M)``, False for padding (a scenario's ``trajectory.scans``). For a
+      method with several sensors (:attr:`AbstractMultiTargetFilter.scan_sensors`, e.g. ``(2,)``)
+      ``(T, 2, M, m)`` and ``(T, 2, M)``.
     - ``save_info``: also keep every scan's step record (``info``).
     - ``warn``: on the host (concrete results only), a :class:`CapacityWarning` when a capacity
       was too small and a ``RuntimeWarning`` when a scan was not ``ok``.
@@ -222,7 +246,7 @@ def run_multitarget(
     (non-finite measurements marked valid included).
     """
     check_method(method)
-    measurements, valid = check_scans(measurements, valid, method.model.meas_dim)
+    measurements, valid = check_scans(measurements, valid, method.scan_meas_dim, method.scan_sensors)
     record = _record_estimates_and_info if save_info else _record_estimates
     final, recs = scan_method(method, measurements, valid, record)
     estimates, ok, events = recs[:3]

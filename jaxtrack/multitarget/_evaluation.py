@@ -30,7 +30,7 @@ from ..models._layout import position_indices
 from ..montecarlo._engine import MonteCarloInterrupted, block_size_for, masked_run_sums, refuse_traced, run_blocks
 from ..montecarlo._ospa import GOSPA, gospa
 from ._base import AbstractMultiTargetFilter, _record_estimates, check_method, scan_method
-from ._scenario import CapacityWarning, Scenario, _check_scenario, _simulate_one
+from ._scenario import AbstractScenario, CapacityWarning
 
 
 class TrackScores(Exportable, eqx.Module):
@@ -200,7 +200,7 @@ TrackerMonteCarloResult = MultiTargetMonteCarloResult  # the former name
 
 def _one_run(key, args):
     method, scenario, target_idx, track_idx, cutoff, order = args
-    truth = _simulate_one(scenario, key)
+    truth = scenario.sample(key)
     _, (est, ok, events) = scan_method(method, truth.scans.measurements, truth.scans.valid, _record_estimates)
     g, scores = score_tracks(
         truth.states[..., target_idx], truth.alive, est.states[..., track_idx], est.mask,
@@ -266,7 +266,7 @@ def _summary(method, scenario, sums, per_run, R, cutoff, order, completed):
 
 def multitarget_monte_carlo(
     method: AbstractMultiTargetFilter,
-    scenario: Scenario,
+    scenario: AbstractScenario,
     key,
     num_runs: int,
     *,
@@ -295,7 +295,10 @@ def multitarget_monte_carlo(
       :class:`~jaxtrack.multitarget.GMCPHD`, :class:`~jaxtrack.multitarget.PMB`,
       :class:`~jaxtrack.multitarget.PMBM`, :class:`~jaxtrack.multitarget.GLMB`,
       :class:`~jaxtrack.multitarget.LMB`; its model may differ from the scenario's: a mismatched
-      study); ``scenario``: a :class:`Scenario`. Both models must declare their state layout (the
+      study); ``scenario``: a :class:`Scenario`, or a
+      :class:`~jaxtrack.multitarget.TwoSensorScenario` for the two-sensor
+      :class:`~jaxtrack.multitarget.TrackFusionTracker` (any :class:`AbstractScenario` whose
+      ``scan_sensors`` and ``scan_meas_dim`` are the method's). Both models must declare their state layout (the
       position components are scored).
     - ``key``: PRNG key or int seed; ``num_runs``: ``R ≥ 2``.
     - ``cutoff``: GOSPA's ``c`` (position units, > 0); ``order``: ``p ≥ 1`` (default 2).
@@ -313,7 +316,9 @@ def multitarget_monte_carlo(
     (``completed=False``; None when fewer than 2 runs had), so an interrupted study keeps what it
     computed: ``except KeyboardInterrupt as e: result = getattr(e, "partial", None)``.
     """
-    _check_scenario(scenario)
+    if not isinstance(scenario, AbstractScenario):
+        raise InputError("`scenario` must be a jaxtrack.multitarget.Scenario or TwoSensorScenario (an AbstractScenario); "
+                         f"got {type(scenario).__name__}.")
     check_method(method)
     if not isinstance(num_runs, int) or num_runs < 2:
         raise InputError(f"`num_runs` must be an int >= 2 (for the interval); got {num_runs!r}.")
@@ -323,10 +328,15 @@ def multitarget_monte_carlo(
         raise InputError(f"`order` must be >= 1; got {order}.")
     if not isinstance(block_size, int) or block_size < 1:
         raise InputError(f"`block_size` must be a positive int; got {block_size!r}.")
-    if method.model.meas_dim != scenario.model.meas_dim:
+    if method.scan_sensors != scenario.scan_sensors:
         raise InputError(
-            f"the method's model measures {method.model.meas_dim} components, the scenario's "
-            f"sensor {scenario.model.meas_dim}."
+            f"the method reads scans of sensor axes {method.scan_sensors}, the scenario simulates "
+            f"{scenario.scan_sensors} (one sensor: (); two stacked: (2,))."
+        )
+    if method.scan_meas_dim != scenario.scan_meas_dim:
+        raise InputError(
+            f"the method's model measures {method.scan_meas_dim} components, the scenario's "
+            f"sensor {scenario.scan_meas_dim}."
         )
     target_idx = _positions(scenario.model.state_layout, "scenario.model")
     track_idx = _positions(method.model.state_layout, "method.model")

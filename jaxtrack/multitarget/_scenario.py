@@ -45,6 +45,7 @@ Keys must use JAX's default Threefry implementation (as for :func:`jaxtrack.mont
 
 from __future__ import annotations
 
+import abc
 import warnings
 
 import equinox as eqx
@@ -60,6 +61,7 @@ from ..montecarlo._noise import key_words, step_normals, threefry2x32
 from ..montecarlo._simulate import noise_factors
 
 __all__ = [
+    "AbstractScenario",
     "CLUTTER",
     "PADDING",
     "CapacityWarning",
@@ -85,7 +87,41 @@ CLUTTER_COUNT_STREAM = 0x63636E74
 CLUTTER_POSITION_STREAM = 0x63706F73
 
 
-class Scenario(eqx.Module):
+class AbstractScenario(eqx.Module):
+    """What a multi-target Monte Carlo simulates: one run of truth and scans from a key.
+
+    :class:`Scenario` (one sensor) and :class:`~jaxtrack.multitarget.TwoSensorScenario` (the same
+    targets seen by two sensors) implement it; :func:`~jaxtrack.multitarget.multitarget_monte_carlo`
+    takes either and calls :meth:`sample` for run ``i`` with ``fold_in(key, i)``. ``model`` is the
+    targets' state-space model (its ``state_layout`` names the positions GOSPA scores);
+    ``max_measurements`` the slots of a scan, ``num_steps`` the scans of a run.
+    ``scan_sensors`` and ``scan_meas_dim`` say what a scan looks like, as the methods'
+    (:attr:`~jaxtrack.multitarget.AbstractMultiTargetFilter.scan_sensors`): the Monte Carlo
+    requires the method's and the scenario's to agree.
+    """
+
+    model: eqx.AbstractVar[AbstractStateSpaceModel]
+    max_measurements: eqx.AbstractVar[int]
+    num_steps: eqx.AbstractVar[int]
+
+    @property
+    def scan_sensors(self) -> tuple[int, ...]:
+        """The axes of a scan before its slots: ``()`` for one sensor."""
+        return ()
+
+    @property
+    def scan_meas_dim(self) -> int:
+        """``m``, the width of a scan's measurement rows."""
+        return self.model.meas_dim
+
+    @abc.abstractmethod
+    def sample(self, key: PRNGKeyArray):
+        """One run from ``key`` (traceable: no host checks, no warnings): a trajectory with fields
+        ``states`` ``(T, N, n)``, ``alive`` ``(T, N)`` and ``scans`` (a :class:`Scan` whose arrays
+        lead with ``(T, *scan_sensors)``)."""
+
+
+class Scenario(AbstractScenario):
     """What to simulate: targets with lifetimes, one motion and sensor model, ``P_D`` and clutter.
 
     Every target moves and is measured through the same state-space model ``model`` (usually a
@@ -257,6 +293,10 @@ class Scenario(eqx.Module):
         """``N``, the number of target slots."""
         return self.initial_states.shape[0]
 
+    def sample(self, key: PRNGKeyArray) -> "MultiTargetTrajectory":
+        """One run from ``key``: :func:`simulate_scenario` without its checks and warning (traceable)."""
+        return _simulate_one(self, key)
+
     @property
     def clutter_volume(self) -> Float[Array, ""]:
         """``V``: the clutter region's measure in measurement space (the product of its widths,
@@ -391,8 +431,11 @@ def _simulate_runs_jit(scenario: Scenario, key, num_runs: int) -> MultiTargetTra
     return jax.vmap(lambda i: _simulate_one(scenario, jax.random.fold_in(key, i)))(runs)
 
 
-def _simulate_one(scenario: Scenario, key) -> MultiTargetTrajectory:
+def _simulate_one(scenario: Scenario, key, truth_states=None) -> MultiTargetTrajectory:
+    """One run. ``truth_states`` ``(T, N, n)`` (possibly traced) replaces the scenario's truth: the
+    targets another sensor's run drew (:class:`~jaxtrack.multitarget.TwoSensorScenario`)."""
     model = scenario.model
+    truth_states = scenario.truth_states if truth_states is None else truth_states
     T, N, M = scenario.num_steps, scenario.max_targets, scenario.max_measurements
     n, m = model.state_dim, model.meas_dim
     dtype = scenario.initial_states.dtype
@@ -404,8 +447,8 @@ def _simulate_one(scenario: Scenario, key) -> MultiTargetTrajectory:
 
     def step(x_prev, k):
         eps = step_normals(words, k, n + m, dtype)  # (n + m, N): targets on the trailing axis
-        if scenario.truth_states is not None:
-            x = scenario.truth_states[k]  # the fixed truth; eps[:n] is drawn and not used
+        if truth_states is not None:
+            x = truth_states[k]  # the fixed truth; eps[:n] is drawn and not used
         else:
             moved = jax.vmap(model.transition, in_axes=(0, None))(x_prev, k)
             if scenario.process_noise:
