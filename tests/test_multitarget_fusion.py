@@ -246,6 +246,23 @@ def test_one_target_fusion_is_ci_of_the_local_tracks_and_differentiable_in_the_w
     assert abs(float(grad)) > 1.0  # the weight matters
 
 
+def test_fused_ids_persist_while_their_local_pairs_persist():
+    """Targets born at scans 0, 3 and 6: each gets the next fused id when both sensors first
+    report it and keeps it at every later scan (the nearest fused track to each alive target
+    carries that id), while the others' ids stay as they were."""
+    staggered = TwoSensorScenario(*scenarios(SEPARATED, birth=(0, 3, 6)))
+    traj = simulate_two_sensors(staggered.sensor1, staggered.sensor2, 4)
+    (_, (_, fused, ok)), _ = _loss_and_grad(0.5, traj.scans, traj.states[:, 0])
+    assert bool(np.all(ok))
+    states, mask, ids = (np.asarray(a) for a in fused)
+    truth, alive = np.asarray(traj.states), np.asarray(traj.alive)
+    for k in range(NUM_SCANS):
+        assert sorted(ids[k][mask[k]].tolist()) == list(range(int(alive[k].sum()))), (k, ids[k])
+        for j in np.flatnonzero(alive[k]):
+            d = np.where(mask[k], np.linalg.norm(states[k, :, :2] - truth[k, j, :2], axis=1), np.inf)
+            assert ids[k, np.argmin(d)] == j and d.min() < 20.0, (k, j, ids[k])
+
+
 # --- (c) consistency with unknown correlation; (d) GOSPA ----------------------------------
 
 
