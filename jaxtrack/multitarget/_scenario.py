@@ -61,9 +61,9 @@ from ..montecarlo._noise import key_words, step_normals, threefry2x32
 from ..montecarlo._simulate import noise_factors
 
 __all__ = [
-    "AbstractScenario",
     "CLUTTER",
     "PADDING",
+    "AbstractScenario",
     "CapacityWarning",
     "MultiTargetTrajectory",
     "Scan",
@@ -293,7 +293,7 @@ class Scenario(AbstractScenario):
         """``N``, the number of target slots."""
         return self.initial_states.shape[0]
 
-    def sample(self, key: PRNGKeyArray) -> "MultiTargetTrajectory":
+    def sample(self, key: PRNGKeyArray) -> MultiTargetTrajectory:
         """One run from ``key``: :func:`simulate_scenario` without its checks and warning (traceable)."""
         return _simulate_one(self, key)
 

@@ -54,7 +54,11 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._validation import InputError, check_shape
 from ..association._gating import gate_threshold
-from ..association._track_to_track import TrackToTrackAssignment, check_gate, track_to_track_assignment
+from ..association._track_to_track import (
+    TrackToTrackAssignment,
+    check_gate,
+    track_to_track_assignment,
+)
 from ..fusion._strategies import AbstractFusionRule, CovarianceIntersection
 from ._base import AbstractMultiTargetFilter, Estimates
 from ._tracker import TrackTable
@@ -279,13 +283,14 @@ class TrackFusionTracker(AbstractMultiTargetFilter):
 
         # The candidate fused tracks, E = N1 + N2 rows: every local-1 slot (fused with its partner or
         # alone), then every local-2 slot that no local-1 track took.
-        rows = dict(
-            mean=jnp.concatenate([jnp.where(paired[:, None], fused.mean, local1.mean), local2.mean]),
-            cov=jnp.concatenate([jnp.where(paired[:, None, None], fused.cov, local1.cov), local2.cov]),
-            id1=jnp.concatenate([local1.track_id, jnp.full((N2,), -1, jnp.int32)]),
-            id2=jnp.concatenate([jnp.where(paired, local2.track_id[partner], -1), local2.track_id]).astype(jnp.int32),
-            weight=jnp.concatenate([jnp.where(paired, weight1, jnp.nan), nan]),
-        )
+        rows = {
+            "mean": jnp.concatenate([jnp.where(paired[:, None], fused.mean, local1.mean), local2.mean]),
+            "cov": jnp.concatenate([jnp.where(paired[:, None, None], fused.cov, local1.cov), local2.cov]),
+            "id1": jnp.concatenate([local1.track_id, jnp.full((N2,), -1, jnp.int32)]),
+            "id2": jnp.concatenate([jnp.where(paired, local2.track_id[partner], -1),
+                                    local2.track_id]).astype(jnp.int32),
+            "weight": jnp.concatenate([jnp.where(paired, weight1, jnp.nan), nan]),
+        }
         reported = jnp.concatenate([c1, c2 & ~taken2])
         new_fused, dropped = self._keep_identities(state.fused, rows, reported)
         ok = (jnp.asarray(info1.ok) & jnp.asarray(info2.ok)

@@ -57,7 +57,7 @@ class TwoSensorTrajectory(eqx.Module):
 
 def _pad_scan(scan: Scan, M: int, m: int) -> Scan:
     """A ``(T, M_i, m_i)`` scan padded to ``(T, M, m)``: rows invalid, extra columns 0."""
-    T, Mi, mi = scan.measurements.shape
+    _, Mi, mi = scan.measurements.shape
     z = jnp.pad(scan.measurements, ((0, 0), (0, M - Mi), (0, m - mi)))
     valid = jnp.pad(scan.valid, ((0, 0), (0, M - Mi)))
     origin = jnp.pad(scan.origin, ((0, 0), (0, M - Mi)), constant_values=PADDING)
