@@ -13,6 +13,9 @@ arrays and a strategy object (an :class:`AbstractFusionRule`) with one ``fuse`` 
 - ``_track``: :func:`run_track_fusion` (two local Kalman filters on one target and a fusion
   centre, one ``lax.scan``), :func:`cross_covariance_step` (Bar-Shalom 1981) and
   :func:`stacked_sensor_model` (both sensors as one model, to simulate a run).
+
+Many targets seen by two sensors: :class:`jaxtrack.multitarget.TrackFusionTracker` (a layer up)
+pairs two multi-target trackers' tracks and fuses each pair with one of these rules.
 """
 
 from ._rules import (
