@@ -16,10 +16,12 @@ optax's ``init``/``update`` shape:
 
 :class:`~jaxtrack.multitarget.Tracker` (GNN, JPDA, JIPDA), :class:`~jaxtrack.multitarget.GMPHD`,
 :class:`~jaxtrack.multitarget.GMCPHD`, :class:`~jaxtrack.multitarget.PMB`,
-:class:`~jaxtrack.multitarget.PMBM`, :class:`~jaxtrack.multitarget.GLMB` and
-:class:`~jaxtrack.multitarget.LMB` implement it; :func:`run_multitarget` (one ``lax.scan``) and
-:func:`~jaxtrack.multitarget.multitarget_monte_carlo` serve all seven, with no dispatch on the
-family. A new family gets both by implementing the four methods. The state layout (the order of
+:class:`~jaxtrack.multitarget.PMBM`, :class:`~jaxtrack.multitarget.GLMB`,
+:class:`~jaxtrack.multitarget.LMB` and the two-sensor
+:class:`~jaxtrack.multitarget.TrackFusionTracker` implement it; :func:`run_multitarget` (one
+``lax.scan``) and :func:`~jaxtrack.multitarget.multitarget_monte_carlo` serve all eight, with no
+dispatch on the family (a method declares the shape of its scans, ``scan_sensors`` and
+``scan_meas_dim``: ``(M, m)`` for one sensor, ``(2, M, m)`` for two stacked). A new family gets both by implementing the four methods. The state layout (the order of
 the state components) is the single-target model's: ``model.state_layout``, e.g.
 ``("x", "y", "vx", "vy")`` for :class:`~jaxtrack.models.ConstantVelocity` in the plane.
 
