@@ -13,6 +13,8 @@ strategy object:
 - ``_track_to_track``: :func:`track_to_track_assignment` (two trackers' tracks paired on
   Bar-Shalom's statistical distance, for track-to-track fusion) and :class:`TrackToTrackAssignment`;
 - ``_murty``: :func:`k_best_assignments` (Murty's k best assignments over several cost matrices);
+- ``_gibbs``: :func:`gibbs_assignments` (good assignments over several cost matrices by Gibbs
+  sampling, Vo, Vo & Hoang 2017: Murty's result type at a cost linear in the samples);
 - ``_jpda``: :class:`PDA`, :class:`JPDA` (exact marginals), :class:`LoopyBP` (belief propagation);
 - ``_pda_update``: :func:`pda_update`, the PDA/JPDA mixture collapse of the conditioned moments.
 """
@@ -38,6 +40,7 @@ from ._murty import (
     KBestAssignments as KBestAssignments,
     k_best_assignments as k_best_assignments,
 )
+from ._gibbs import gibbs_assignments as gibbs_assignments
 from ._jpda import (
     JPDA as JPDA,
     PDA as PDA,
@@ -57,6 +60,7 @@ __all__ = [
     "TrackToTrackAssignment",
     "KBestAssignments",
     "k_best_assignments",
+    "gibbs_assignments",
     "JPDA",
     "PDA",
     "LoopyBP",

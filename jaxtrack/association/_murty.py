@@ -39,6 +39,46 @@ class KBestAssignments(eqx.Module):
     num_solutions: Int[Array, ""]
 
 
+def check_problem(cost, offsets=None, valid_parents=None):
+    """The argument checks shared by :func:`k_best_assignments` and
+    :func:`~jaxtrack.association.gibbs_assignments`: ``cost`` as a float ``(P, R, C)`` tensor
+    (a 2-D one gets ``P = 1``) with ``R ≤ C``, ``offsets`` ``(P,)`` in its dtype (default 0),
+    ``valid_parents`` ``(P,)`` bool (default all True). **Raises:** :class:`~jaxtrack.InputError`
+    naming the argument."""
+    cost = jnp.asarray(cost)
+    if cost.ndim not in (2, 3):
+        raise InputError(f"`cost` must have shape (P, R, C) or (R, C); got shape {cost.shape}.")
+    if not jnp.issubdtype(cost.dtype, jnp.floating):
+        cost = cost.astype(jnp.result_type(float))
+    if cost.ndim == 2:
+        cost = cost[None]
+    P, R, C = cost.shape
+    if R > C:
+        raise InputError(
+            f"`cost` must have no more rows than columns (every row is assigned); got R={R} > C={C}."
+        )
+    if offsets is None:
+        offsets = jnp.zeros((P,), cost.dtype)
+    offsets = jnp.asarray(offsets)
+    if offsets.shape != (P,):
+        raise InputError(f"`offsets` must have shape ({P},) (one per cost matrix); got {offsets.shape}.")
+    offsets = offsets.astype(cost.dtype)
+    if valid_parents is None:
+        valid_parents = jnp.ones((P,), bool)
+    valid_parents = jnp.asarray(valid_parents)
+    if valid_parents.shape != (P,):
+        raise InputError(f"`valid_parents` must have shape ({P},); got {valid_parents.shape}.")
+    return cost, offsets, valid_parents.astype(bool)
+
+
+def check_count(name: str, value) -> int:
+    """``value`` as a static Python int ``≥ 1`` (``k``, ``num_chains``, ``num_sweeps``), else
+    :class:`~jaxtrack.InputError` naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise InputError(f"`{name}` must be a static Python int >= 1; got {value!r}.")
+    return value
+
+
 def _solve(work, allowed, offset):
     """Best complete assignment of one masked matrix: (row_to_col, total, feasible)."""
     row_to_col, total = linear_assignment(work, allowed)
@@ -112,32 +152,9 @@ def k_best_assignments(
     >>> best.parent.tolist(), best.row_to_col.tolist(), best.total_cost.tolist()
     ([1, 0, 0], [[0, 1], [1, 0], [0, 1]], [0.5, 4.0, 5.0])
     """
-    cost = jnp.asarray(cost)
-    if cost.ndim not in (2, 3):
-        raise InputError(f"`cost` must have shape (P, R, C) or (R, C); got shape {cost.shape}.")
-    if not jnp.issubdtype(cost.dtype, jnp.floating):
-        cost = cost.astype(jnp.result_type(float))
-    if cost.ndim == 2:
-        cost = cost[None]
+    cost, offsets, valid_parents = check_problem(cost, offsets, valid_parents)
     P, R, C = cost.shape
-    if R > C:
-        raise InputError(
-            f"`cost` must have no more rows than columns (every row is assigned); got R={R} > C={C}."
-        )
-    if isinstance(k, bool) or not isinstance(k, int) or k < 1:
-        raise InputError(f"`k` must be a static Python int >= 1; got {k!r}.")
-    if offsets is None:
-        offsets = jnp.zeros((P,), cost.dtype)
-    offsets = jnp.asarray(offsets)
-    if offsets.shape != (P,):
-        raise InputError(f"`offsets` must have shape ({P},) (one per cost matrix); got {offsets.shape}.")
-    offsets = offsets.astype(cost.dtype)
-    if valid_parents is None:
-        valid_parents = jnp.ones((P,), bool)
-    valid_parents = jnp.asarray(valid_parents)
-    if valid_parents.shape != (P,):
-        raise InputError(f"`valid_parents` must have shape ({P},); got {valid_parents.shape}.")
-    valid_parents = valid_parents.astype(bool)
+    check_count("k", k)
 
     # The ranking is discrete: it runs on stopped values; the gradient comes from the gather below.
     work = jax.lax.stop_gradient(cost)

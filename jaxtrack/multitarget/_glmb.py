@@ -42,10 +42,18 @@ which give the same posterior hypothesis). A posterior hypothesis is a prior row
 injective map ``θ`` of its candidates to choices; its weight is ``w_h Π_i η_i(θ_i)``. With
 costs ``−log η`` this is a ranked assignment: rows = the ``P`` candidates, columns = the gated
 measurements, then ``P`` "missed" and ``P`` "absent" columns on two diagonal blocks (VVH17
-Sec. IV-A, the ``P × (M + 2P)`` cost matrix), offset ``−log w_h``; the ``K`` best posterior
-hypotheses over ALL prior rows at once come from Murty's ranked assignment
-(:func:`~jaxtrack.association.k_best_assignments`, ``K = max_hypotheses``). A detected track's
-component is the filter's update on its measurement, a missed one keeps the prediction.
+Sec. IV-A, the ``P × (M + 2P)`` cost matrix), offset ``−log w_h``. The ``ranking`` strategy
+generates up to ``K = max_hypotheses`` posterior hypotheses over ALL prior rows at once:
+
+- :class:`MurtyRanking` (default): the ``K`` best, exactly, by Murty's ranked assignment
+  (:func:`~jaxtrack.association.k_best_assignments`; ``O(K·P³·(A + 2P))`` per scan);
+- :class:`GibbsSampling`: the ``K`` cheapest distinct hypotheses visited by VVH17's Gibbs sampler
+  (Sec. IV-B; :func:`~jaxtrack.association.gibbs_assignments`): per prior row, chains of
+  systematic scans over the candidates, each redrawn from ``η_i(·)`` over the choices the
+  others leave free (linear in the samples, so a larger ``K`` is affordable).
+
+A detected track's component is the filter's update on its measurement, a missed one keeps the
+prediction.
 
 Then the **projection strategy**:
 
@@ -91,7 +99,8 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._validation import InputError, is_concrete
 from ..association._gating import measurement_likelihoods
-from ..association._murty import k_best_assignments
+from ..association._gibbs import gibbs_assignments
+from ..association._murty import KBestAssignments, check_count, k_best_assignments
 from ..filters._base import AbstractFilter
 from ..models._base import AbstractStateSpaceModel
 from ._base import AbstractMultiTargetFilter, Estimates, scan_ok
@@ -105,10 +114,13 @@ __all__ = [
     "LMB",
     "AbstractLabelledFilter",
     "AbstractLabelledProjection",
+    "AbstractLabelledRanking",
     "DeltaGLMB",
+    "GibbsSampling",
     "GLMBState",
     "GLMBStepInfo",
     "LMBProjection",
+    "MurtyRanking",
 ]
 
 
@@ -346,13 +358,75 @@ class LMBProjection(AbstractLabelledProjection):
 
 
 # ------------------------------------------------------------------------------------------------
+# Ranking strategies: how the posterior hypotheses are generated from the cost tensor.
+
+
+class AbstractLabelledRanking(eqx.Module):
+    """How a labelled filter generates its posterior hypotheses from the joint prediction–update's
+    cost tensor (module docstring): :class:`MurtyRanking` (the ``K`` best, exactly) or
+    :class:`GibbsSampling` (the ``K`` best of the distinct hypotheses a Gibbs sampler visits).
+    ``hypotheses(cost, K, offsets, valid_parents, step)`` → a
+    :class:`~jaxtrack.association.KBestAssignments` with ``K`` rows, ascending cost."""
+
+    @abc.abstractmethod
+    def hypotheses(self, cost: Float[Array, "R P C"], num: int, offsets: Float[Array, " R"],
+                   valid_parents: Bool[Array, " R"], step: Int[Array, ""]) -> KBestAssignments:
+        """Up to ``num`` posterior hypotheses: ``cost`` ``(R, P, A + 2P)`` (``−log η``),
+        ``offsets`` ``(R,)`` (``−log w_h``), ``step`` the scan index."""
+
+
+class MurtyRanking(AbstractLabelledRanking):
+    """The ``K`` best posterior hypotheses over all prior ones, in order: Murty's ranked
+    assignment with one shared queue (:func:`~jaxtrack.association.k_best_assignments`; VVH17
+    Sec. IV-A). Exact; costs ``O(K·P³·(A + 2P))`` per scan. The default."""
+
+    def hypotheses(self, cost, num, offsets, valid_parents, step):
+        return k_best_assignments(cost, num, offsets=offsets, valid_parents=valid_parents)
+
+
+class GibbsSampling(AbstractLabelledRanking):
+    """The ``K`` cheapest distinct posterior hypotheses visited by the Gibbs sampler of VVH17
+    Sec. IV-B (:func:`~jaxtrack.association.gibbs_assignments`): every prior hypothesis gives its
+    best posterior hypothesis and starts ``num_chains`` chains of ``num_sweeps`` systematic scans
+    over its ``P`` candidates, each candidate redrawn from ``η_i(·)`` over the choices the other
+    candidates leave free. Not exact (the ``K`` best only once the samples cover them); costs
+    ``O(R·num_chains·num_sweeps·P·(A + 2P))`` per scan plus ``R`` Hungarian solves, so a large
+    ``max_hypotheses`` is affordable.
+
+    **Arguments:** ``num_chains``, ``num_sweeps``: static ints ``≥ 1`` (per prior hypothesis:
+    ``1 + num_chains·num_sweeps`` samples); ``seed``: int, the PRNG seed. Scan ``k`` draws with
+    ``fold_in(key(seed), k)``, so a run is reproducible and the same under ``jax.vmap`` (each run
+    of a batch its own measurements, the same key stream; ``seed`` is an array leaf, so a batch of
+    seeds can be vmapped too).
+    """
+
+    num_chains: int = eqx.field(static=True)
+    num_sweeps: int = eqx.field(static=True)
+    seed: Int[Array, ""]
+
+    def __init__(self, num_chains: int, num_sweeps: int, seed=0):
+        self.num_chains = check_count("num_chains", num_chains)
+        self.num_sweeps = check_count("num_sweeps", num_sweeps)
+        seed_ = jnp.asarray(seed)
+        if seed_.shape != () or not jnp.issubdtype(seed_.dtype, jnp.integer):
+            raise InputError(f"`seed` must be an integer scalar; got {seed!r}.")
+        self.seed = seed_
+
+    def hypotheses(self, cost, num, offsets, valid_parents, step):
+        key = jax.random.fold_in(jax.random.key(self.seed), step)
+        return gibbs_assignments(cost, num, key=key, num_chains=self.num_chains, num_sweeps=self.num_sweeps,
+                                 offsets=offsets, valid_parents=valid_parents)
+
+
+# ------------------------------------------------------------------------------------------------
 # The filter.
 
 
 def _glmb_fields(self, filter, model, *, prob_survival, prob_detect, birth, max_tracks: int, max_hypotheses: int,
                  clutter_density=None, clutter_rate=None, clutter_volume=None, clutter_spatial_density=None,
                  assignment_measurements: int | None = None, hypothesis_threshold=0.0, existence_threshold=1e-5,
-                 gate=math.inf, projection: AbstractLabelledProjection | None = None) -> None:
+                 gate=math.inf, projection: AbstractLabelledProjection | None = None,
+                 ranking: AbstractLabelledRanking | None = None) -> None:
     """Check and set the fields of a :class:`GLMB` or :class:`LMB` (``self``), as documented on
     :class:`GLMB`; :class:`~jaxtrack.InputError` naming the argument. Concrete values are checked
     here, once, so the scan needs no host callback."""
@@ -391,6 +465,10 @@ def _glmb_fields(self, filter, model, *, prob_survival, prob_detect, birth, max_
     if not isinstance(projection, AbstractLabelledProjection):
         raise InputError(f"`projection` must be DeltaGLMB() or LMBProjection(); got {type(projection).__name__}.")
     self.projection = projection
+    ranking = MurtyRanking() if ranking is None else ranking
+    if not isinstance(ranking, AbstractLabelledRanking):
+        raise InputError(f"`ranking` must be MurtyRanking() or GibbsSampling(...); got {type(ranking).__name__}.")
+    self.ranking = ranking
 
 
 class AbstractLabelledFilter(AbstractMultiTargetFilter):
@@ -408,6 +486,7 @@ class AbstractLabelledFilter(AbstractMultiTargetFilter):
     existence_threshold: Float[Array, ""]
     gate: Float[Array, ""]
     projection: AbstractLabelledProjection
+    ranking: AbstractLabelledRanking
     max_tracks: int = eqx.field(static=True)
     max_hypotheses: int = eqx.field(static=True)
     assignment_measurements: int | None = eqx.field(static=True)
@@ -494,7 +573,7 @@ class AbstractLabelledFilter(AbstractMultiTargetFilter):
         cost = jnp.concatenate([c_meas, jnp.where(eye, c_miss[:, :, None], jnp.inf),
                                 jnp.where(eye, c_absent[:, :, None], jnp.inf)], axis=-1)  # (R, P, A + 2P)
         offsets = -jnp.where(state.hypothesis_active, state.log_weights, 0.0)
-        kb = k_best_assignments(cost, K, offsets=offsets, valid_parents=state.hypothesis_active)
+        kb = self.ranking.hypotheses(cost, K, offsets, state.hypothesis_active, k)
 
         ok = kb.valid
         log_total, log_w = log_normalise(jnp.where(ok, -kb.total_cost, -jnp.inf), ok)
@@ -583,6 +662,9 @@ class GLMB(AbstractLabelledFilter):
     - ``gate``: Mahalanobis distance beyond which a measurement cannot update a track (default
       ``inf``).
     - ``projection``: :class:`DeltaGLMB` (default) or :class:`LMBProjection`.
+    - ``ranking``: how the posterior hypotheses are generated: :class:`MurtyRanking` (default: the
+      ``max_hypotheses`` best, exactly) or :class:`GibbsSampling` (the best of the distinct ones a
+      Gibbs sampler visits; VVH17 Sec. IV-B).
 
     ``P_S``, ``P_D``, ``κ``, the birth and the thresholds are array leaves (no recompilation when
     they change; a traced one out of range makes the scan's ``ok`` False).
@@ -608,13 +690,14 @@ class GLMB(AbstractLabelledFilter):
     def __init__(self, filter, model, *, prob_survival, prob_detect, birth, max_tracks: int, max_hypotheses: int,
                  clutter_density=None, clutter_rate=None, clutter_volume=None, clutter_spatial_density=None,
                  assignment_measurements: int | None = None, hypothesis_threshold=0.0, existence_threshold=1e-5,
-                 gate=math.inf, projection: AbstractLabelledProjection | None = None):
+                 gate=math.inf, projection: AbstractLabelledProjection | None = None,
+                 ranking: AbstractLabelledRanking | None = None):
         _glmb_fields(self, filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth=birth,
                      max_tracks=max_tracks, max_hypotheses=max_hypotheses, clutter_density=clutter_density,
                      clutter_rate=clutter_rate, clutter_volume=clutter_volume,
                      clutter_spatial_density=clutter_spatial_density, assignment_measurements=assignment_measurements,
                      hypothesis_threshold=hypothesis_threshold, existence_threshold=existence_threshold, gate=gate,
-                     projection=projection)
+                     projection=projection, ranking=ranking)
 
 
 class LMB(AbstractLabelledFilter):
@@ -622,7 +705,8 @@ class LMB(AbstractLabelledFilter):
     ``max_hypotheses`` best δ-GLMB posterior hypotheses, projected back to an LMB
     (:class:`LMBProjection`) after every scan. Same arguments as :class:`GLMB` (without
     ``projection``); the state is a :class:`GLMBState` with one row whose ``existence`` are the
-    labels' ``r``. Estimates: the LMB's MAP cardinality, then the labels of highest ``r``.
+    labels' ``r``. Estimates: the LMB's MAP cardinality, then the labels of highest ``r``. Takes
+    ``ranking=`` as :class:`GLMB` does.
 
     ??? cite "Reference"
 
@@ -638,10 +722,10 @@ class LMB(AbstractLabelledFilter):
     def __init__(self, filter, model, *, prob_survival, prob_detect, birth, max_tracks: int, max_hypotheses: int,
                  clutter_density=None, clutter_rate=None, clutter_volume=None, clutter_spatial_density=None,
                  assignment_measurements: int | None = None, hypothesis_threshold=0.0, existence_threshold=1e-5,
-                 gate=math.inf):
+                 gate=math.inf, ranking: AbstractLabelledRanking | None = None):
         _glmb_fields(self, filter, model, prob_survival=prob_survival, prob_detect=prob_detect, birth=birth,
                      max_tracks=max_tracks, max_hypotheses=max_hypotheses, clutter_density=clutter_density,
                      clutter_rate=clutter_rate, clutter_volume=clutter_volume,
                      clutter_spatial_density=clutter_spatial_density, assignment_measurements=assignment_measurements,
                      hypothesis_threshold=hypothesis_threshold, existence_threshold=existence_threshold, gate=gate,
-                     projection=LMBProjection())
+                     projection=LMBProjection(), ranking=ranking)
