@@ -16,8 +16,19 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import stats
-from test_glmb import _compare, _draw_scan, _existence_error, _hypotheses, _kwargs, _model, _prior, _prior_state, \
-    _random_case, _scan, _with
+from test_glmb import (
+    _compare,
+    _draw_scan,
+    _existence_error,
+    _hypotheses,
+    _kwargs,
+    _model,
+    _prior,
+    _prior_state,
+    _random_case,
+    _scan,
+    _with,
+)
 
 from jaxtrack import InputError
 from jaxtrack.association import gibbs_assignments, k_best_assignments
@@ -176,7 +187,7 @@ def test_glmb_with_gibbs_from_prior_hypotheses_equals_the_enumeration(glmb_gibbs
 def test_errors_name_the_argument():
     cost = np.zeros((2, 4))
     key = jax.random.key(0)
-    good = dict(key=key, num_chains=2, num_sweeps=2)
+    good = {"key": key, "num_chains": 2, "num_sweeps": 2}
     for kwargs, match in [
         (dict(good, num_chains=0), "num_chains"), (dict(good, num_chains=2.5), "num_chains"),
         (dict(good, num_sweeps=0), "num_sweeps"), (dict(good, num_sweeps=True), "num_sweeps"),

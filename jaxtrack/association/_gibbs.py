@@ -148,7 +148,7 @@ def gibbs_assignments(
     ([[0, 1], [1, 0], [2, 1]], [0.5, 2.0, 2.5])
     """
     cost, offsets, valid_parents = check_problem(cost, offsets, valid_parents)
-    P, R, C = cost.shape
+    P, R, _ = cost.shape
     check_count("k", k)
     check_count("num_chains", num_chains)
     check_count("num_sweeps", num_sweeps)

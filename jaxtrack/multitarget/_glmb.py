@@ -116,9 +116,9 @@ __all__ = [
     "AbstractLabelledProjection",
     "AbstractLabelledRanking",
     "DeltaGLMB",
-    "GibbsSampling",
     "GLMBState",
     "GLMBStepInfo",
+    "GibbsSampling",
     "LMBProjection",
     "MurtyRanking",
 ]
