@@ -6,7 +6,9 @@ four labels with ``r_B = 0.03``), run ``i`` drawn from ``jax.random.fold_in(key,
 ``GLMB`` and ``LMB`` with a Kalman filter, the settings of :class:`VoVoLinearSettings`, a
 Mahalanobis gate of ``--gate`` (default 4), ``--tracks`` slots, ``--hypotheses`` ranked
 hypotheses, ``--columns`` gated measurement columns and the LMB's ``--existence-threshold``
-(default 1e-5, the library's).
+(default 1e-5, the library's); the hypotheses come from ``--ranking murty`` (``MurtyRanking()``,
+the default) or ``--ranking gibbs`` (``GibbsSampling(--chains, --sweeps, seed=--gibbs-seed)``:
+per prior hypothesis ``1 + chains·sweeps`` samples).
 
 Timed (after a warm-up call; compilation reported separately; best of ``--repeats``):
 
@@ -26,6 +28,31 @@ Measured (2026-12-07, this repository's shared 2-core CPU machine, 8 runs, gate 
 | GLMB | 64, 24 | 30.7 s | 37.7 s | 17.8 m | 102.1 m | 0.69 |
 | LMB | 64, 24 | 19.6 s | 34.9 s | 13.3 m | 82.6 m | 0.24 |
 
+Gibbs sampling as the δ-GLMB's hypothesis generation (``--ranking gibbs``; measured 2026-12-07
+13:02-13:33 UTC on the same shared 2-core CPU machine, jax 0.10.2, 8 runs, gate 4, ``A = 24``,
+``N = 16``; another session's benchmark held one core at about 13:02-13:12, so the first Gibbs rows
+are pessimistic; the Murty row was rerun in the same window, and OSPA, GOSPA and the cardinality
+error are deterministic, equal in both runs):
+
+| filter, ranking | ``H`` | chains × sweeps | one run | batch of 8, per run | mean OSPA | mean GOSPA | mean abs. cardinality error |
+|---|---|---|---|---|---|---|---|
+| GLMB, Murty | 32 | – | 4.0 s (4.1 s rerun) | 6.6 s (5.5 s rerun) | 18.50 m | 105.11 m | 0.766 |
+| LMB, Murty | 32 | – | 3.1 s | 6.6 s | 13.37 m | 82.91 m | 0.244 (18 capacity events) |
+| GLMB, Gibbs | 128 | 2 × 8 | 3.5 s (3.1 s rerun) | 4.1 s (3.4 s rerun) | 14.75 m | 88.50 m | 0.381 |
+| GLMB, Gibbs | 256 | 2 × 8 | 8.0 s | 8.8 s | 14.53 m | 87.58 m | 0.360 |
+| GLMB, Gibbs | 256 | 4 × 8 | 10.0 s | 11.3 s | 14.42 m | 87.95 m | 0.367 |
+| GLMB, Gibbs | 512 | 2 × 8 | 16.8 s | 15.0 s | 13.34 m | 82.54 m | 0.253 (10 capacity events) |
+| GLMB, Gibbs | 512 | 1 × 4 | 10.7 s | 10.4 s | 13.99 m | 84.84 m | 0.302 (14 capacity events) |
+
+Gibbs at ``H = 128`` is faster than Murty at ``H = 32`` (no ``P³`` subproblems, a batch no longer
+waits for the slowest run's ``while_loop``) and closes most of the gap to the LMB (OSPA 18.5 →
+14.8 m, cardinality error 0.77 → 0.38). Only ``H = 512`` matches the LMB (13.3 m), at 4× Murty's
+time: there most of a scan is no longer the ranking but what grows with ``H`` around it (one
+scan at ``H = 512``: 0.19 s, of which sampling 2 × 8 ≈ 0.09 s, likelihoods of all ``H·P``
+candidates on all ``M`` slots, Hungarian starts and updates ≈ 0.07 s, the projection's
+``O(H²)`` merge of equal hypotheses ≈ 0.04 s). More samples per hypothesis (4 × 8 instead of
+2 × 8 at ``H = 256``) buy almost nothing; more hypotheses do.
+
 A vmapped batch costs more per run than one run here: the runs' Murty loops (``while_loop``) step
 side by side until the longest is done, on two cores. Murty's cost grows as ``H·P³·(A + 2P)``
 with ``P = N + B`` candidate rows (empty slots included), hence the jump from ``N = 16`` to 24.
@@ -36,6 +63,7 @@ start it again once it has moved away; the LMB keeps such labels with a small ``
 Usage::
 
     python benchmarks/glmb.py [--runs 8] [--hypotheses 32] [--tracks 16] [--columns 24] [--gate 4]
+        [--ranking murty|gibbs] [--chains 4] [--sweeps 8] [--gibbs-seed 0] [--filters GLMB LMB]
 """
 
 from __future__ import annotations
@@ -54,10 +82,14 @@ from jaxtrack.multitarget._base import _record_estimates, scan_method
 
 
 def _filters(scen, st, args):
+    ranking = (mt.MurtyRanking() if args.ranking == "murty"
+               else mt.GibbsSampling(args.chains, args.sweeps, seed=args.gibbs_seed))
     kw = {"prob_survival": st.prob_survival, "prob_detect": st.prob_detect, "clutter_density": st.clutter_density,
           "birth": st.birth, "max_tracks": args.tracks, "max_hypotheses": args.hypotheses, "gate": args.gate,
-          "assignment_measurements": args.columns, "existence_threshold": args.existence_threshold}
-    return {"GLMB": mt.GLMB(KalmanFilter(), scen.model, **kw), "LMB": mt.LMB(KalmanFilter(), scen.model, **kw)}
+          "assignment_measurements": args.columns, "existence_threshold": args.existence_threshold,
+          "ranking": ranking}
+    make = {"GLMB": mt.GLMB, "LMB": mt.LMB}
+    return {name: make[name](KalmanFilter(), scen.model, **kw) for name in args.filters}
 
 
 def _best(fn, repeats):
@@ -79,13 +111,20 @@ def main():
     p.add_argument("--existence-threshold", type=float, default=1e-5)
     p.add_argument("--repeats", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--ranking", choices=("murty", "gibbs"), default="murty")
+    p.add_argument("--chains", type=int, default=4, help="Gibbs: chains per prior hypothesis")
+    p.add_argument("--sweeps", type=int, default=8, help="Gibbs: sweeps per chain (each a sample)")
+    p.add_argument("--gibbs-seed", type=int, default=0)
+    p.add_argument("--filters", nargs="+", choices=("GLMB", "LMB"), default=["GLMB", "LMB"])
     args = p.parse_args()
     scen, st = mt.vo_vo_linear(0)
     trajs = mt.simulate_scenarios(scen, args.seed, args.runs)
     z, v = trajs.scans.measurements, trajs.scans.valid
     truth, alive = trajs.states[..., :2], trajs.alive
     print(f"vo_vo_linear: {scen.num_steps} scans, {args.runs} runs, M = {scen.max_measurements} slots; "
-          f"H = {args.hypotheses}, N = {args.tracks}, A = {args.columns}, gate {args.gate}; device {jax.devices()[0]}")
+          f"H = {args.hypotheses}, N = {args.tracks}, A = {args.columns}, gate {args.gate}; ranking {args.ranking}"
+          + (f" ({args.chains} chains x {args.sweeps} sweeps per prior hypothesis)" if args.ranking == "gibbs" else "")
+          + f"; device {jax.devices()[0]}")
     for name, f in _filters(scen, st, args).items():
         one = jax.jit(lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1])
         batch = jax.jit(jax.vmap(lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1]))
