@@ -398,6 +398,10 @@ class GibbsSampling(AbstractLabelledRanking):
     ``fold_in(key(seed), k)``, so a run is reproducible and the same under ``jax.vmap`` (each run
     of a batch its own measurements, the same key stream; ``seed`` is an array leaf, so a batch of
     seeds can be vmapped too).
+
+    Measured on Vo & Vo's benchmark (``benchmarks/glmb.py``, 8 runs, 2-core CPU): ``GibbsSampling(2,
+    8)`` at ``H = 128`` runs in 3.1 s against Murty's 4.1 s at ``H = 32``, mean OSPA 14.8 m against
+    18.5 m (the LMB: 13.4 m); ``H = 512`` reaches 13.3 m at 16.8 s.
     """
 
     num_chains: int = eqx.field(static=True)
@@ -635,8 +639,9 @@ class AbstractLabelledFilter(AbstractMultiTargetFilter):
 
 class GLMB(AbstractLabelledFilter):
     r"""The δ-GLMB filter (Vo & Vo 2013) with the joint prediction–update of Vo, Vo & Hoang (2017)
-    and Murty's ranked assignment over all prior hypotheses at once, with fixed budgets (module
-    docstring for the layout and the equations). ``GLMB(..., projection=LMBProjection())`` is the
+    over all prior hypotheses at once — the posterior hypotheses by Murty's ranked assignment
+    (default) or Gibbs sampling (``ranking=``) — with fixed budgets (module docstring for the
+    layout and the equations). ``GLMB(..., projection=LMBProjection())`` is the
     LMB filter (:class:`LMB` is exactly that).
 
     **Arguments:**
