@@ -19,7 +19,7 @@ from jaxtrack.applications.vo_vo.scenario import (
     MAX_HYPOTHESES,
     MAX_TRACKS,
 )
-from jaxtrack.multitarget import GLMB, LMB, DeltaGLMB, LMBProjection
+from jaxtrack.multitarget import GLMB, LMB, DeltaGLMB, GibbsSampling, LMBProjection, MurtyRanking
 
 
 def test_the_filters_are_what_the_study_says():
@@ -28,8 +28,12 @@ def test_the_filters_are_what_the_study_says():
     assert tuple(m) == vo_vo.METHODS == ("glmb", "lmb")
     assert isinstance(m["glmb"], GLMB) and isinstance(m["glmb"].projection, DeltaGLMB)
     assert isinstance(m["lmb"], LMB) and isinstance(m["lmb"].projection, LMBProjection)
-    for f in m.values():
-        assert (f.max_tracks, f.max_hypotheses, f.assignment_measurements) == (MAX_TRACKS, MAX_HYPOTHESES,
+    assert MAX_HYPOTHESES == {"glmb": 128, "lmb": 32}
+    assert isinstance(m["glmb"].ranking, GibbsSampling)
+    assert (m["glmb"].ranking.num_chains, m["glmb"].ranking.num_sweeps) == (2, 8)
+    assert isinstance(m["lmb"].ranking, MurtyRanking)
+    for name, f in m.items():
+        assert (f.max_tracks, f.max_hypotheses, f.assignment_measurements) == (MAX_TRACKS, MAX_HYPOTHESES[name],
                                                                               ASSIGNMENT_MEASUREMENTS)
         assert float(f.gate) == GATE and float(f.prob_detect) == 0.98 and float(f.prob_survival) == 0.99
         assert float(f.clutter_density) == pytest.approx(66 / 2000**2)

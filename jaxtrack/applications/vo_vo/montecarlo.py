@@ -12,7 +12,7 @@ import jax
 import numpy as np
 
 from ...multitarget import MultiTargetMonteCarloResult, multitarget_monte_carlo
-from .scenario import MAX_HYPOTHESES, MAX_TRACKS, METHODS, methods, scenario
+from .scenario import MAX_TRACKS, METHODS, methods, scenario
 
 DEFAULT_RUNS = 20
 # One run a block: a vmapped block of δ-GLMB runs costs more per run than one run (each run's
@@ -39,7 +39,7 @@ class VoVoStudy:
 
 
 def run_study(num_runs: int = DEFAULT_RUNS, *, num_steps: int | None = None, progress: bool = False,
-              max_hypotheses: int = MAX_HYPOTHESES, max_tracks: int = MAX_TRACKS) -> VoVoStudy:
+              max_hypotheses: int | None = None, max_tracks: int = MAX_TRACKS) -> VoVoStudy:
     """Both filters' Monte Carlo on ``num_runs`` runs (the first ``num_steps`` scans if given)."""
     scen, settings = scenario(num_steps)
     meth = methods(scen, settings, max_hypotheses=max_hypotheses, max_tracks=max_tracks)
