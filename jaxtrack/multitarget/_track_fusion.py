@@ -155,9 +155,15 @@ class TrackFusionTracker(AbstractMultiTargetFilter):
       None: the 99% quantile of χ²(n).
     - ``capacity``: the fused table's slots ``K`` (static); default None: the two local
       capacities' sum, which never overflows (every fused track holds a local track of its own).
+    - ``unpaired``: report a confirmed track that only one sensor holds (default True: a target
+      outside the other sensor's view or missed by it stays tracked). False reports the fused pairs
+      only, which drops each sensor's false tracks where the two sensors' clutter is independent
+      (tests/test_multitarget_fusion.py: 3 crossing targets, 2 clutter points a scan, mean GOSPA
+      2.34 m against 19.52 m with unpaired tracks and 14.71 m for the local trackers).
 
     **Raises:** :class:`~jaxtrack.InputError` naming ``local1``, ``local2`` (not a tracker with a
-    TrackTable, different state dimensions or layouts), ``rule``, ``gate`` or ``capacity``.
+    TrackTable, different state dimensions or layouts), ``rule``, ``gate``, ``capacity`` or
+    ``unpaired``.
 
     References: Y. Bar-Shalom, P. K. Willett and X. Tian, *Tracking and Data Fusion: A Handbook of
     Algorithms*, YBS Publishing, 2011 (track-to-track association and fusion); S. J. Julier and J.
@@ -170,6 +176,7 @@ class TrackFusionTracker(AbstractMultiTargetFilter):
     rule: AbstractFusionRule
     gate: float = eqx.field(static=True)
     capacity: int = eqx.field(static=True)
+    unpaired: Bool[Array, ""]  # an array leaf: both settings share one compiled step
     labelled: ClassVar[bool] = True
 
     def __init__(
@@ -180,6 +187,7 @@ class TrackFusionTracker(AbstractMultiTargetFilter):
         *,
         gate: float | None = None,
         capacity: int | None = None,
+        unpaired: bool = True,
     ):
         t1, t2 = _table_of(local1, "local1"), _table_of(local2, "local2")
         n1, n2 = t1.mean.shape[1], t2.mean.shape[1]
@@ -202,8 +210,11 @@ class TrackFusionTracker(AbstractMultiTargetFilter):
         self.local1 = local1
         self.local2 = local2
         self.rule = rule
+        if not isinstance(unpaired, (bool, np.bool_)):
+            raise InputError(f"`unpaired` must be a bool; got {unpaired!r}.")
         self.gate = float(gate)
         self.capacity = int(capacity)
+        self.unpaired = jnp.asarray(bool(unpaired))
 
     @property
     def model(self):
@@ -291,7 +302,9 @@ class TrackFusionTracker(AbstractMultiTargetFilter):
                                     local2.track_id]).astype(jnp.int32),
             "weight": jnp.concatenate([jnp.where(paired, weight1, jnp.nan), nan]),
         }
-        reported = jnp.concatenate([c1, c2 & ~taken2])
+        # A track only one sensor holds is reported only with `unpaired` (a target the other sensor
+        # misses or cannot see stays tracked; a false track of either stays too).
+        reported = jnp.concatenate([c1 & (paired | self.unpaired), c2 & ~taken2 & self.unpaired])
         new_fused, dropped = self._keep_identities(state.fused, rows, reported)
         ok = (jnp.asarray(info1.ok) & jnp.asarray(info2.ok)
               & jnp.all(~new_fused.live[:, None] | jnp.isfinite(new_fused.mean)))
