@@ -153,10 +153,11 @@ def pytest_addoption(parser):
 # runs before this file's, and then sends every test on its own, so a module fixture was built on
 # both workers and torn down between tests.)
 _LONG_FIRST = (
-    "test_notebooks", "test_multitarget_contract", "test_performance_paths", "test_bearings_tma",
-    "test_multitarget_learning", "test_sharding", "test_design", "test_obem_registration",
+    "test_notebooks", "test_multitarget_contract", "test_performance_paths", "test_multitarget_fusion",
+    "test_bearings_tma", "test_multitarget_learning", "test_sharding", "test_design", "test_obem_registration",
     "test_particle_filter", "test_maneuvering", "test_properties", "test_sensors",
-    "test_multitarget_study", "test_sensitivity", "test_calibration", "test_imm_fit",
+    "test_multitarget_study", "test_sensitivity", "test_sensor_management", "test_calibration",
+    "test_multitarget_no_silent_answers", "test_gibbs", "test_glmb", "test_imm_fit", "test_pmbm",
     "test_imm_smoother", "test_faults", "test_pcrlb", "test_square_root", "test_nonlinear_filters",
     "test_mc_detections", "test_filters", "test_radar_bias", "test_mc_design", "test_ho_study",
     "test_covariance", "test_motion_models", "test_learning_em", "test_imm", "test_core_api",
