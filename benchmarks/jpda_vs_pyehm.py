@@ -168,7 +168,11 @@ def main(argv=None):
     load = os.getloadavg()[0]
     import jaxtrack
 
-    where = os.path.dirname(os.path.dirname(os.path.abspath(jaxtrack.__file__)))
+    # Which checkout's jaxtrack ran, relative to this script's repository (no machine paths in
+    # the measured files).
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    where = os.path.relpath(os.path.dirname(os.path.dirname(os.path.abspath(jaxtrack.__file__))), root)
+    where = "this checkout" if where == "." else where
     rows = [run_case(*case, batch=a.batch, repeats=a.repeats, seed=a.seed + i) for i, case in enumerate(CASES)]
     lines = [
         (f"jpda_vs_pyehm: float64, {os.cpu_count()} cores ({platform.processor() or platform.machine()}), "

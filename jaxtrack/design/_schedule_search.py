@@ -185,6 +185,23 @@ def _apply_move(problem: SensorSchedulingProblem, schedule: Array, move: Array) 
     return jnp.where(move < num_single, single, swapped)
 
 
+def _total_cost(problem: SensorSchedulingProblem, factors: Array, schedule: Array) -> Array:
+    """``J = Σ_i J_i`` of ``schedule`` ``(T, S)``: one one-target recursion per target."""
+    return jnp.sum(jax.vmap(lambda i: _target_cost(problem, factors, i, _subsets_of(schedule, i)))(
+        jnp.arange(problem.num_targets)))
+
+
+def _take_best(problem, schedule, J, moves, costs, rtol, move_of=None, allowed=True):
+    """One local-search step: the cheapest neighbour in ``costs`` (neighbour ``move_of[i]`` of
+    :func:`_apply_move` for entry ``i``; default ``i``), taken when it lowers ``J`` by more than
+    ``rtol·|J|`` (and ``allowed``). **Returns** the loop carry ``(schedule, J, moves, improved)``."""
+    best = jnp.argmin(costs)
+    improved = (costs[best] < J - rtol * jnp.abs(J)) & allowed
+    move = best if move_of is None else move_of[best]
+    return (jnp.where(improved, _apply_move(problem, schedule, move), schedule),
+            jnp.where(improved, costs[best], J), moves + improved.astype(moves.dtype), improved)
+
+
 def _polish_one(problem, schedule, max_iter, rtol):
     """Best-improvement local search on the exact discrete cost: every iteration takes the
     cheapest neighbour (:func:`_move_costs`; the first in :func:`_apply_move` order among equals)
@@ -202,14 +219,9 @@ def _polish_one(problem, schedule, max_iter, rtol):
 
     def body(carry):
         schedule, J, moves, _ = carry
-        costs, _ = costs_of(schedule)
-        best = jnp.argmin(costs)
-        improved = costs[best] < J - rtol * jnp.abs(J)
-        return (jnp.where(improved, _apply_move(problem, schedule, best), schedule),
-                jnp.where(improved, costs[best], J), moves + improved.astype(moves.dtype), improved)
+        return _take_best(problem, schedule, J, moves, costs_of(schedule)[0], rtol)
 
-    J0 = jnp.sum(jax.vmap(lambda i: _target_cost(problem, factors, i, _subsets_of(schedule, i)))(
-        jnp.arange(problem.num_targets)))
+    J0 = _total_cost(problem, factors, schedule)
     schedule, J, moves, improved = jax.lax.while_loop(
         cond, body, (schedule, J0, jnp.asarray(0, jnp.int32), jnp.asarray(True)))
     # At the cap the loop stops without knowing whether one more move would help: look once more.
@@ -285,10 +297,7 @@ def _screened_polish_one(problem, schedule, max_iter, rtol, k):
         else:
             costs = singles.ravel()
             move_of = jnp.arange(num_single, dtype=jnp.int32)
-        best = jnp.argmin(costs)
-        improved = costs[best] < J - rtol * jnp.abs(J)
-        return (jnp.where(improved, _apply_move(problem, schedule, move_of[best]), schedule),
-                jnp.where(improved, costs[best], J), moves + improved.astype(moves.dtype), improved)
+        return _take_best(problem, schedule, J, moves, costs, rtol, move_of)
 
     def full_costs(schedule):
         singles, swaps, _ = _move_costs(problem, factors, schedule)
@@ -300,14 +309,9 @@ def _screened_polish_one(problem, schedule, max_iter, rtol, k):
     def outer_step(carry):
         schedule, J, moves, _ = carry
         schedule, J, moves, _ = jax.lax.while_loop(can_move, screened_step, (schedule, J, moves, jnp.asarray(True)))
-        costs = full_costs(schedule)
-        best = jnp.argmin(costs)
-        improved = (costs[best] < J - rtol * jnp.abs(J)) & (moves < max_iter)
-        return (jnp.where(improved, _apply_move(problem, schedule, best), schedule),
-                jnp.where(improved, costs[best], J), moves + improved.astype(moves.dtype), improved)
+        return _take_best(problem, schedule, J, moves, full_costs(schedule), rtol, allowed=moves < max_iter)
 
-    J0 = jnp.sum(jax.vmap(lambda i: _target_cost(problem, factors, i, _subsets_of(schedule, i)))(
-        jnp.arange(problem.num_targets)))
+    J0 = _total_cost(problem, factors, schedule)
     schedule, J, moves, _ = jax.lax.while_loop(
         can_move, outer_step, (schedule, J0, jnp.asarray(0, jnp.int32), jnp.asarray(True)))
     still = jnp.min(full_costs(schedule)) < J - rtol * jnp.abs(J)

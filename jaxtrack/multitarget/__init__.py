@@ -33,9 +33,9 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
 - ``_glmb``: :class:`GLMB` (the δ-GLMB filter of Vo & Vo 2013 with the joint prediction–update of
   Vo, Vo & Hoang 2017: Murty's ranked assignment over all prior hypotheses, fixed track and
   hypothesis budgets) and :class:`LMB` (Reuter et al. 2014: the same step projected to an LMB),
-  the projection strategies :class:`DeltaGLMB`, :class:`LMBProjection`, the hypothesis-generation
-  strategies :class:`MurtyRanking` (the default) and :class:`GibbsSampling` (VVH17's Gibbs
-  sampler), :class:`GLMBState`;
+  the projection strategies :class:`DeltaGLMB`, :class:`LMBProjection`, :class:`GLMBState`;
+- ``_labelled_ranking``: their hypothesis-generation strategies :class:`MurtyRanking` (the
+  default) and :class:`GibbsSampling` (VVH17's Gibbs sampler);
 - ``_two_sensors``: :class:`TwoSensorScenario`, :func:`simulate_two_sensors` (the same targets
   seen by two sensors, the scans stacked ``(T, 2, M, m)``), :class:`TwoSensorTrajectory`;
 - ``_track_fusion``: :class:`TrackFusionTracker` (two local trackers, one per sensor, and a fusion
@@ -112,12 +112,14 @@ from ._glmb import (
     LMB as LMB,
     AbstractLabelledFilter as AbstractLabelledFilter,
     AbstractLabelledProjection as AbstractLabelledProjection,
-    AbstractLabelledRanking as AbstractLabelledRanking,
     DeltaGLMB as DeltaGLMB,
-    GibbsSampling as GibbsSampling,
     GLMBState as GLMBState,
     GLMBStepInfo as GLMBStepInfo,
     LMBProjection as LMBProjection,
+)
+from ._labelled_ranking import (
+    AbstractLabelledRanking as AbstractLabelledRanking,
+    GibbsSampling as GibbsSampling,
     MurtyRanking as MurtyRanking,
 )
 from ._scenario import AbstractScenario as AbstractScenario
