@@ -265,6 +265,26 @@ def test_fused_ids_persist_while_their_local_pairs_persist():
             assert ids[k, np.argmin(d)] == j and d.min() < 20.0, (k, j, ids[k])
 
 
+def test_a_fused_id_survives_the_second_sensor_starting_and_stopping_to_see_its_target():
+    """One target; sensor 2's scans are blanked before scan 3 and from scan 7 on. Sensor 1's track
+    is reported alone (fused id 0), then paired with sensor 2's new track at scan 3, then alone again
+    once sensor 2's track ends: one fused track with id 0 at every scan. (Keyed by the exact local
+    pair, the pairing would have issued id 1 at scan 3 and id 2 at the unpairing.)"""
+    traj = simulate_two_sensors(ONE_TARGET.sensor1, ONE_TARGET.sensor2, 5)
+    k = np.arange(NUM_SCANS)
+    sensor2_sees = (k >= 3) & (k < 7)
+    valid = np.asarray(traj.scans.valid).copy()
+    valid[:, 1] &= sensor2_sees[:, None]
+    scans = eqx.tree_at(lambda s: s.valid, traj.scans, jnp.asarray(valid))
+    (_, (final, fused, ok)), _ = _loss_and_grad(0.5, scans, traj.states[:, 0])
+    assert bool(np.all(ok))
+    mask, ids = np.asarray(fused.mask), np.asarray(fused.ids)
+    assert mask.sum(axis=1).tolist() == [1] * NUM_SCANS, mask.sum(axis=1)
+    assert ids[mask].tolist() == [0] * NUM_SCANS, ids[mask]
+    # It was a pair while sensor 2 saw the target, and sensor 1's track alone before.
+    assert int(np.asarray(final.fused.next_id)) == 1
+
+
 # --- (c) consistency with unknown correlation; (d) GOSPA ----------------------------------
 
 

@@ -16,7 +16,8 @@ JPDA and different sensor models), and a fusion centre, at every scan,
    track of either tracker passes through as it is;
 3. **keeps identities** in a fixed-capacity fused table (:class:`FusedTable`): a fused track is
    keyed by its local pair ``(id₁, id₂)`` (−1 for a side without a track), keeps its slot and its
-   fused id for as long as that key is reported, and a new key gets a new id in a free slot.
+   fused id for as long as that key is reported or one side of it stays (a target the second
+   sensor starts or stops seeing keeps its id), and a new key gets a new id in a free slot.
    When there is no free slot the fused track is not reported and the refusal is counted
    (``FusedTable.num_dropped``, part of :meth:`TrackFusionTracker.capacity_events`, warned on the
    host as a :class:`~jaxtrack.multitarget.CapacityWarning`), never dropped in silence.
@@ -73,7 +74,9 @@ class FusedTable(eqx.Module):
       scan, in the state's units (0 in empty slots).
     - ``live`` ``(K,)`` bool: the slots holding a fused track.
     - ``track_id`` ``(K,)`` int32: the fused track's identity (−1 in empty slots); it persists for
-      as long as its local pair ``(local_id1, local_id2)`` is reported.
+      as long as its local pair ``(local_id1, local_id2)`` is reported, and through a change of
+      one side of the pair: a single-sensor track that becomes paired, or a pair that loses one
+      sensor's track, keeps its id (:meth:`TrackFusionTracker._keep_identities`).
     - ``local_id1``, ``local_id2`` ``(K,)`` int32: the local trackers' track ids the fused track
       is made of (−1: that tracker has no track in it, the other's passes through).
     - ``weight`` ``(K,)``: the rule's weight ``ω`` of the local-1 track (CI, split CI); NaN for an
@@ -312,17 +315,33 @@ class TrackFusionTracker(AbstractMultiTargetFilter):
         return TrackFusionState(local1, local2, new_fused), info
 
     def _keep_identities(self, prev: FusedTable, rows: dict, reported: Bool[Array, " E"]):
-        """Place the reported candidate rows in the fused table: a row whose local pair
-        ``(id1, id2)`` a live slot holds keeps that slot and its id; the others take the free slots
-        in ascending order, with new ids; those without a free slot are counted.
+        """Place the reported candidate rows in the fused table, keeping identities.
+
+        A row whose local pair ``(id1, id2)`` a live slot holds keeps that slot and its id. A row
+        that shares one local track with a live slot no row kept exactly continues that slot too:
+        a single-sensor track that becomes paired (``(a, −1)`` → ``(a, b)``), or a pair that loses
+        one side (``(a, b)`` → ``(a, −1)``). Where two rows could continue a slot, the first row
+        (local-1 rows come first) does; where a row could continue two slots (``(a, −1)`` and
+        ``(−1, b)`` merging), it continues the older fused id and the other ends. The remaining rows
+        take the free slots in ascending order, with new ids; those without a free slot are counted.
         **Returns:** ``(table, dropped ())``."""
         K, E = self.capacity, reported.shape[0]
         # Local ids are unique over a run, so a key matches at most one live slot and vice versa.
         match = (reported[:, None] & prev.live[None, :] & (rows["id1"][:, None] == prev.local_id1[None, :])
                  & (rows["id2"][:, None] == prev.local_id2[None, :]))
-        continues = jnp.any(match, axis=1)
-        prev_slot = jnp.argmax(match, axis=1)
-        kept = jnp.any(match, axis=0)
+        exact = jnp.any(match, axis=1)
+        kept_exact = jnp.any(match, axis=0)
+        # Continuity through one shared local track, among the rows and slots left unmatched: each
+        # slot offers itself to its first such row; each row takes the offer of the smallest id.
+        shares = (((rows["id1"][:, None] >= 0) & (rows["id1"][:, None] == prev.local_id1[None, :]))
+                  | ((rows["id2"][:, None] >= 0) & (rows["id2"][:, None] == prev.local_id2[None, :])))
+        partial = (reported & ~exact)[:, None] & (prev.live & ~kept_exact)[None, :] & shares
+        offer = partial & (jnp.arange(E)[:, None] == jnp.argmax(partial, axis=0)[None, :])
+        inherits = jnp.any(offer, axis=1)
+        inherited_slot = jnp.argmin(jnp.where(offer, prev.track_id[None, :], jnp.iinfo(jnp.int32).max), axis=1)
+        continues = exact | inherits
+        prev_slot = jnp.where(exact, jnp.argmax(match, axis=1), inherited_slot)
+        kept = jnp.zeros((K + 1,), bool).at[jnp.where(continues, prev_slot, K)].set(True)[:K]
         new = reported & ~continues
         free_slots = jnp.nonzero(~kept, size=K, fill_value=K)[0]  # ascending
         num_new = jnp.sum(new)
