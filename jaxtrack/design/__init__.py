@@ -25,12 +25,14 @@ from ._rates import (
     per_step_design as per_step_design,
 )
 from ._sensor_management import (
+    ScheduleSimulation as ScheduleSimulation,
     SensorScheduleDesign as SensorScheduleDesign,
     SensorSchedulingProblem as SensorSchedulingProblem,
     greedy_sensor_schedule as greedy_sensor_schedule,
     relaxed_schedule_cost as relaxed_schedule_cost,
     relaxed_sensor_schedule as relaxed_sensor_schedule,
     schedule_cost as schedule_cost,
+    simulate_sensor_schedule as simulate_sensor_schedule,
 )
 from ._schedules import (
     NewtonResult as NewtonResult,
@@ -71,10 +73,12 @@ __all__ = [
     "constrained_turn_rates",
     "design_observer_path",
     "observer_states",
+    "ScheduleSimulation",
     "SensorScheduleDesign",
     "SensorSchedulingProblem",
     "greedy_sensor_schedule",
     "relaxed_schedule_cost",
     "relaxed_sensor_schedule",
     "schedule_cost",
+    "simulate_sensor_schedule",
 ]
