@@ -113,6 +113,28 @@ def _single_table(problem: SensorSchedulingProblem, factors: Array, schedule: Ar
     return D, rows
 
 
+def _refresh_table(problem: SensorSchedulingProblem, factors: Array, D: Array, rows: Array, schedule: Array
+                   ) -> tuple[Array, Array]:
+    """:func:`_single_table` of ``schedule`` from the table ``D`` and ``rows`` of the schedule before
+    one move: ``D[i]`` depends on target ``i``'s own looks only, so only the targets whose rows the
+    move changed (two for an exchange, at most ``2S`` for a joint-look change) are recomputed, one
+    after another (a ``while_loop`` over their count: ``T·2^S`` recursions each instead of
+    ``N·T·2^S`` in all). Each entry is the same one-target recursion as the full table's."""
+    T, S, N = problem.num_scans, problem.num_sensors, problem.num_targets
+    new_rows = jax.vmap(lambda i: _subsets_of(schedule, i))(jnp.arange(N))
+    changed = jnp.any(new_rows != rows, axis=1)
+    which = jnp.nonzero(changed, size=N, fill_value=0)[0]
+    k, m = (jnp.asarray(a.ravel(), jnp.int32) for a in np.meshgrid(np.arange(T), np.arange(2**S), indexing="ij"))
+
+    def one_target(j, D):
+        i = which[j]
+        row = jax.vmap(lambda k, m: _target_cost(problem, factors, i, new_rows[i].at[k].set(m)))(k, m)
+        return D.at[i].set(row.reshape(T, 2**S))
+
+    D = jax.lax.fori_loop(0, jnp.sum(changed), one_target, D)
+    return D, new_rows
+
+
 def _single_costs(problem: SensorSchedulingProblem, D: Array, rows: Array) -> tuple[Array, Array]:
     """From the table of :func:`_single_table`: the cost of every single move ``(T, N^S)`` (each
     scan's joint look replaced by each joint look, :func:`_configurations` order) and the current
@@ -277,8 +299,7 @@ def _screened_polish_one(problem, schedule, max_iter, rtol, k):
     k = min(k, int(p_all.size))
 
     def screened_step(carry):
-        schedule, J, moves, _ = carry
-        D, rows = _single_table(problem, factors, schedule)
+        (schedule, J, moves, _), (D, rows) = carry
         singles, current = _single_costs(problem, D, rows)
         if k:
             _, idx = jax.lax.top_k(-_exchange_estimates(problem, D, rows, current, schedule), k)
@@ -297,7 +318,9 @@ def _screened_polish_one(problem, schedule, max_iter, rtol, k):
         else:
             costs = singles.ravel()
             move_of = jnp.arange(num_single, dtype=jnp.int32)
-        return _take_best(problem, schedule, J, moves, costs, rtol, move_of)
+        step = _take_best(problem, schedule, J, moves, costs, rtol, move_of)
+        # The table follows the move: only the targets whose looks it changed are recomputed.
+        return step, _refresh_table(problem, factors, D, rows, step[0])
 
     def full_costs(schedule):
         singles, swaps, _ = _move_costs(problem, factors, schedule)
@@ -307,8 +330,10 @@ def _screened_polish_one(problem, schedule, max_iter, rtol, k):
         return carry[3] & (carry[2] < max_iter)
 
     def outer_step(carry):
-        schedule, J, moves, _ = carry
-        schedule, J, moves, _ = jax.lax.while_loop(can_move, screened_step, (schedule, J, moves, jnp.asarray(True)))
+        schedule = carry[0]
+        step, _ = jax.lax.while_loop(lambda c: can_move(c[0]), screened_step,
+                                     ((*carry[:3], jnp.asarray(True)), _single_table(problem, factors, schedule)))
+        schedule, J, moves, _ = step
         return _take_best(problem, schedule, J, moves, full_costs(schedule), rtol, allowed=moves < max_iter)
 
     J0 = _total_cost(problem, factors, schedule)
