@@ -32,6 +32,7 @@ from .._validation import (
     is_concrete,
     nan_where_traced,
 )
+from ..filters._linalg import cholesky_and_inverse
 from ..filters._updates import symmetrize
 
 Criterion = Literal["trace", "det"]
@@ -128,17 +129,21 @@ def _estimate(mean, cov, **extra) -> FusedEstimate:
 
 def _spd_inverse(a: Array) -> Array:
     """``a⁻¹`` for a symmetric positive definite ``a``, as ``L⁻ᵀ L⁻¹``: exactly symmetric."""
-    L = jnp.linalg.cholesky(a)
-    L_inv = jsl.solve_triangular(L, jnp.eye(a.shape[-1], dtype=a.dtype), lower=True)
+    _, L_inv = cholesky_and_inverse(a)
     return L_inv.T @ L_inv
 
 
 def _criterion_of_information(Y: Array, criterion: str) -> Array:
-    """``tr(Y⁻¹)`` or ``log det(Y⁻¹)`` from one Cholesky factor of the information matrix ``Y``."""
-    L = jnp.linalg.cholesky(Y)
+    """``tr(Y⁻¹)`` or ``log det(Y⁻¹)`` from one Cholesky factor of the information matrix ``Y``.
+
+    The factor and its inverse are written out entry by entry up to ``n = 4``
+    (``filters._linalg``), not LAPACK calls: XLA:CPU (jax 0.10.2) stopped with every thread idle
+    on the optimal weight's 64-step bisection of ``tr(Y⁻¹)`` batched over 3,200 pairs (800 runs of
+    a 4-slot fusion tracker) through ``potrf``/``trsm`` and their derivatives, while 3,000 took 0.2 s.
+    """
+    L, L_inv = cholesky_and_inverse(Y)
     if criterion == "det":
         return -2.0 * jnp.sum(jnp.log(jnp.diagonal(L)))
-    L_inv = jsl.solve_triangular(L, jnp.eye(Y.shape[-1], dtype=Y.dtype), lower=True)
     return jnp.sum(L_inv * L_inv)
 
 
