@@ -7,8 +7,11 @@ the CPU, with this checkout's jaxtrack first on ``PYTHONPATH`` and the suite's e
 otherwise (tests/conftest.py: its compilation cache, its XLA optimisation level); it must exit 0
 and print the line its results hang on (a ratio, a speed-up, an agreement check). A script whose
 peer library is not installed is skipped, naming it. Scripts that write files are pointed into
-``tmp_path``: nothing is written to benchmarks/measured/. Slow (about 6 minutes on 2 cores):
-``pytest --runslow tests/test_benchmarks_smoke.py`` (part of ``make test-slow``).
+``tmp_path``: nothing is written to benchmarks/measured/. Slow: ``pytest --runslow
+tests/test_benchmarks_smoke.py`` (part of ``make test-slow``) took 6:44 on 2 cores shared with
+other jobs (load 6 to 8), cold or warm compilation cache alike (2026-12-07; the longest:
+sensor_management 28-77 s, maneuvering_study 50-55 s, phd_batch 43-58 s, pmbm 42-46 s,
+phd_reductions 31-50 s; each test prints its script's wall time under ``-s``).
 """
 
 from __future__ import annotations
