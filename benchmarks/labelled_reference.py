@@ -243,8 +243,13 @@ def compare(args) -> str:
     lines = []
     say = lambda s="": (print(s), lines.append(s))
     ref_commit = _git(["rev-parse", "--short=7", "HEAD"], args.labeledrfs) if args.labeledrfs else "?"
-    cmd = "python benchmarks/labelled_reference.py " + " ".join(
-        a for a in sys.argv[1:] if not os.path.isabs(a))
+    def shown(a):  # no machine paths in the measured file
+        if not os.path.isabs(a):
+            return a
+        rel = os.path.relpath(a, REPO)
+        return rel if not rel.startswith("..") else "<" + os.path.basename(a.rstrip("/")) + ">"
+
+    cmd = "python benchmarks/labelled_reference.py " + " ".join(shown(a) for a in sys.argv[1:])
     say("# Issue 49: jaxtrack's δ-GLMB and LMB against the labeledRFS Python port on Vo & Vo's linear benchmark")
     say(f"date {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC; machine {platform.machine()}, "
         f"{os.cpu_count()} CPUs ({platform.processor() or platform.platform()}); {_versions()}; jaxtrack commit "
@@ -268,8 +273,8 @@ def compare(args) -> str:
             keep = True
             say("The model, as the driver set it (printed by benchmarks/_labeledrfs_driver.py):")
             continue
-        if line.startswith("numpy "):
-            keep = False
+        if line.startswith("numpy ") and keep:
+            break  # the first table (a resumed driver prints it again)
         if keep:
             say("  " + line)
     for lines_ in logs.values():
@@ -307,7 +312,10 @@ def compare(args) -> str:
             say(f"  scans with |difference| ≤ 2 SE: {int(within.sum())}/{T} = {frac:.2f} (equal filters: about "
                 f"{p_within * T:.0f} expected, P(|t_{n - 1}| ≤ 2) = {p_within:.3f}; fewer than {low} has probability "
                 f"≤ 1% under Bin({T}, {p_within:.3f}) if scans were independent — they are not, the runs are shared)")
-            say(f"  scans outside: {np.flatnonzero(~within).tolist()}")
+            tiny = ~within & (np.abs(mean) < 0.01)
+            say(f"  scans outside: {np.flatnonzero(~within).tolist()}" + (
+                f" (of them {int(tiny.sum())} with |difference| < 0.01: {np.flatnonzero(tiny).tolist()}, an SE near 0 "
+                "where both filters agree on almost every run)" if tiny.any() else ""))
             say(f"  largest |difference|/SE at scans (0-indexed) {worst.tolist()}: differences "
                 f"{np.round(mean[worst], 3).tolist()}, SE {np.round(se[worst], 3).tolist()}")
             stats[(name, label)] = (a.mean(0), b.mean(0), mean, se)
