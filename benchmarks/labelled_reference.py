@@ -2,7 +2,7 @@
 port (linh-gist/labeledRFS, MIT; its ``jointglmb_gms_python``, a port of Vo & Vo's MATLAB
 ``jointglmb/gms``, and ``jointlmb_gms_python``), on Vo & Vo's linear benchmark.
 
-Steps (``--stage all``, or one of ``export``, ``ours``, ``reference``, ``compare`` to redo a part):
+Steps (``--stage all``, or a comma-separated list of ``export``, ``ours``, ``reference``, ``compare`` to redo a part):
 
 1. ``export``: ``--runs`` runs (default 100) of :func:`jaxtrack.multitarget.vo_vo_linear`, run
    ``i`` simulated from ``jax.random.fold_in(jax.random.key(13), i)`` exactly as the labelled study
@@ -75,13 +75,16 @@ How the filters differ (same model numbers; settings of each left at its own def
 
 # --------------------------------------------------------------------------- export / ours (jaxtrack)
 
-def _study():
+def _study(glmb_hypotheses: int | None = None):
     import importlib
 
     study = importlib.import_module("jaxtrack.applications.vo_vo.scenario")
     montecarlo = importlib.import_module("jaxtrack.applications.vo_vo.montecarlo")
     scen, settings = study.scenario()
-    return scen, settings, study.methods(scen, settings), montecarlo.EVALUATION_KEY
+    meth = study.methods(scen, settings)
+    if glmb_hypotheses is not None:  # the study's δ-GLMB at another hypothesis budget
+        meth["glmb"] = study.methods(scen, settings, max_hypotheses=glmb_hypotheses)["glmb"]
+    return scen, settings, meth, montecarlo.EVALUATION_KEY
 
 
 def export(runs: int, workdir: str) -> str:
@@ -110,17 +113,18 @@ def export(runs: int, workdir: str) -> str:
     return path
 
 
-def ours(workdir: str, runs: int | None = None, repeats: int = 2) -> str:
+def ours(workdir: str, runs: int | None = None, repeats: int = 2, glmb_hypotheses: int | None = None,
+         filters=FILTERS, tag: str = "") -> str:
     import jax
 
     from jaxtrack.multitarget._base import _record_estimates, scan_method
 
-    _, _, meth, _ = _study()
+    _, _, meth, _ = _study(glmb_hypotheses)
     d = np.load(os.path.join(workdir, "runs.npz"))
     z, v = jax.numpy.asarray(d["z"][:runs]), jax.numpy.asarray(d["valid"][:runs])
     R = z.shape[0]
-    out = {}
-    for name in FILTERS:
+    out = {"glmb_hypotheses": meth["glmb"].max_hypotheses}
+    for name in filters:
         f = meth[name]
         run = lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1]
         batch = jax.jit(jax.vmap(run))
@@ -154,7 +158,7 @@ def ours(workdir: str, runs: int | None = None, repeats: int = 2) -> str:
         print(f"ours {name}: batch of {R}: {wall_batch:.1f} s ({wall_batch / R:.3f} s a run; CPU {cpu_batch / R:.3f} s a run; "
               f"compile {compile_batch:.1f} s); one run {best:.3f} s (CPU {best_cpu:.3f} s; best of {repeats}; compile {compile_one:.1f} s); capacity events "
               f"{int(out[f'{name}_events'].sum())}, scans not ok {int((~out[f'{name}_ok']).sum())}", flush=True)
-    path = os.path.join(workdir, "ours.npz")
+    path = os.path.join(workdir, f"ours{tag}.npz")
     np.savez(path, **out)
     return path
 
@@ -235,11 +239,12 @@ def _git(args, path):
 
 def compare(args) -> str:
     d = np.load(os.path.join(args.workdir, "runs.npz"))
-    o = np.load(os.path.join(args.workdir, "ours.npz"))
+    o = np.load(os.path.join(args.workdir, f"ours{args.tag}.npz"))
+    filters = [name for name in FILTERS if f"{name}_pos" in o.files]
     refs = {name: os.path.join(args.workdir, f"reference_{name}.npz") for name in FILTERS}
     truth, alive = d["truth"], d["alive"]
     T = d["valid"].shape[1]
-    R = o["glmb_pos"].shape[0]  # the runs of jaxtrack's batch
+    R = o[f"{filters[0]}_pos"].shape[0]  # the runs of jaxtrack's batch
     lines = []
     say = lambda s="": (print(s), lines.append(s))
     ref_commit = _git(["rev-parse", "--short=7", "HEAD"], args.labeledrfs) if args.labeledrfs else "?"
@@ -281,8 +286,10 @@ def compare(args) -> str:
         for line in dict.fromkeys(x for x in lines_ if "filter settings" in x):
             say(line)
     say()
+    if "glmb" in filters and "glmb_hypotheses" in o.files:
+        say(f"jaxtrack's δ-GLMB keeps H = {int(o['glmb_hypotheses'])} hypotheses (the study: 128)")
     stats = {}
-    for name in FILTERS:
+    for name in filters:
         r = np.load(refs[name]) if os.path.exists(refs[name]) else {}
         done = (r[f"{name}_done"] if f"{name}_done" in r else np.zeros(d["valid"].shape[0], bool))[:R]
         n = int(done.sum())
@@ -389,7 +396,8 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--runs", type=int, default=100)
     p.add_argument("--workdir", default=None, help="work folder (default: a new temporary folder)")
-    p.add_argument("--stage", choices=("all", "export", "ours", "reference", "compare"), default="all")
+    p.add_argument("--stage", default="all",
+                   help="all, or a comma-separated list of export, ours, reference, compare")
     p.add_argument("--reference-python", default=os.environ.get("LABELEDRFS_PYTHON"),
                    help="the reference's interpreter (numpy < 2); default $LABELEDRFS_PYTHON")
     p.add_argument("--labeledrfs", default=os.environ.get("LABELEDRFS_DIR"),
@@ -400,20 +408,29 @@ def main():
     p.add_argument("--reference-runs-lmb", type=int, default=None, help="reference LMB runs (default --runs)")
     p.add_argument("--reference-seed", type=int, default=0)
     p.add_argument("--lmb-birth", choices=("fixed", "adaptive"), default="fixed")
-    p.add_argument("--out", default=os.path.join(HERE, "measured", "labelled_reference.txt"))
+    p.add_argument("--glmb-hypotheses", type=int, default=None,
+                   help="jaxtrack's δ-GLMB hypothesis budget H (default the study's, 128)")
+    p.add_argument("--filters", default="glmb,lmb", help="jaxtrack's filters to run in --stage ours")
+    p.add_argument("--tag", default="", help="suffix of jaxtrack's result file (ours{TAG}.npz) and of --out's default")
+    p.add_argument("--out", default=None, help="default benchmarks/measured/labelled_reference{TAG}.txt")
     args = p.parse_args()
-    if args.stage in ("all", "reference") and not (args.reference_python and args.labeledrfs):
+    args.out = args.out or os.path.join(HERE, "measured", f"labelled_reference{args.tag}.txt")
+    stages = {"export", "ours", "reference", "compare"} if args.stage == "all" else set(args.stage.split(","))
+    if not stages <= {"export", "ours", "reference", "compare"}:
+        p.error(f"--stage: unknown {sorted(stages - {'export', 'ours', 'reference', 'compare'})}")
+    if "reference" in stages and not (args.reference_python and args.labeledrfs):
         p.error("the reference needs --reference-python and --labeledrfs (or LABELEDRFS_PYTHON, LABELEDRFS_DIR)")
     args.workdir = args.workdir or tempfile.mkdtemp(prefix="labelled_reference_")
     os.makedirs(args.workdir, exist_ok=True)
     print("workdir:", args.workdir, flush=True)
-    if args.stage in ("all", "export"):
+    if "export" in stages:
         export(args.runs, args.workdir)
-    if args.stage in ("all", "ours"):
-        ours(args.workdir, args.ours_runs)
-    if args.stage in ("all", "reference"):
+    if "ours" in stages:
+        ours(args.workdir, args.ours_runs, glmb_hypotheses=args.glmb_hypotheses,
+             filters=[f for f in args.filters.split(",") if f], tag=args.tag)
+    if "reference" in stages:
         reference(args)
-    if args.stage in ("all", "compare"):
+    if "compare" in stages:
         compare(args)
 
 

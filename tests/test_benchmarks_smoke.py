@@ -49,6 +49,9 @@ SCRIPTS: dict[str, tuple[list[str], tuple[str, ...], str]] = {
             r"scores: time-averaged position RMSE [\d.]+ m"),
     "jpda_vs_pyehm": (["--batch", "4", "--repeats", "1"], ("pyehm",),
                       r"every scan's marginals equal EHM2's to [\d.e+-]+, [\d.e+-]+, [\d.e+-]+"),
+    # The reference (the labeledRFS port) needs its own venv and checkout: only jaxtrack's stages here.
+    "labelled_reference": (["--stage", "export,ours", "--runs", "2", "--workdir", "{tmp}", "--filters", "glmb",
+                            "--glmb-hypotheses", "4"], (), r"ours glmb: batch of 2: [\d.]+ s"),
     "maneuvering_study": (["--runs", "2", "--repeats", "1"], (),
                           r"old / new +: first call [\d.]+x, warm [\d.]+x"),
     "mc_gradient": (["--runs", "16", "--steps", "10", "--repeats", "1"], (), r"gradient / forward +: [\d.]+x"),
@@ -81,7 +84,7 @@ SCRIPTS: dict[str, tuple[list[str], tuple[str, ...], str]] = {
                  "--repeats", "1"], (), r"shared covariance \(64 runs\)\n[^\n]*\n +1 [^\n]*yes\n +2 [^\n]*yes"),
     "sensitivity_cost": (["--steps", "10", "--repeats", "1", "--sizes", "2"], (),
                          r"n =  2: adjoint gradient is [\d.]+x faster than reverse mode"),
-    "sensor_management": (["--scenario", "one", "--repeats", "0"], ("stonesoup",),
+    "sensor_management": (["--scenario", "one", "--repeats", "0", "--runs", "50"], ("stonesoup",),
                           r"greedy schedule identical to Stone Soup's: (True|False)"),
 }
 
