@@ -75,11 +75,18 @@ How the filters differ (same model numbers; settings of each left at its own def
 
 # --------------------------------------------------------------------------- export / ours (jaxtrack)
 
-def _study(glmb_hypotheses: int | None = None):
+def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs: str | None = None):
     import importlib
 
     study = importlib.import_module("jaxtrack.applications.vo_vo.scenario")
     montecarlo = importlib.import_module("jaxtrack.applications.vo_vo.montecarlo")
+    if gate is not None:  # the study's filters with another Mahalanobis gate (read when they are built)
+        study.GATE = gate
+    if gibbs is not None:  # the δ-GLMB's Gibbs sampler with other chains × sweeps per prior hypothesis
+        from jaxtrack.multitarget import GibbsSampling
+
+        chains, sweeps = (int(x) for x in gibbs.split("x"))
+        study.GLMB_RANKING = GibbsSampling(chains, sweeps, seed=study.GLMB_RANKING.seed)
     scen, settings = study.scenario()
     meth = study.methods(scen, settings)
     if glmb_hypotheses is not None:  # the study's δ-GLMB at another hypothesis budget
@@ -114,16 +121,18 @@ def export(runs: int, workdir: str) -> str:
 
 
 def ours(workdir: str, runs: int | None = None, repeats: int = 2, glmb_hypotheses: int | None = None,
-         filters=FILTERS, tag: str = "") -> str:
+         filters=FILTERS, tag: str = "", gate: float | None = None, gibbs: str | None = None) -> str:
     import jax
 
     from jaxtrack.multitarget._base import _record_estimates, scan_method
 
-    _, _, meth, _ = _study(glmb_hypotheses)
+    _, _, meth, _ = _study(glmb_hypotheses, gate, gibbs)
     d = np.load(os.path.join(workdir, "runs.npz"))
     z, v = jax.numpy.asarray(d["z"][:runs]), jax.numpy.asarray(d["valid"][:runs])
     R = z.shape[0]
-    out = {"glmb_hypotheses": meth["glmb"].max_hypotheses}
+    rk = meth["glmb"].ranking
+    out = {"glmb_hypotheses": meth["glmb"].max_hypotheses, "gate": float(meth["glmb"].gate),
+           "glmb_ranking": f"{type(rk).__name__}({getattr(rk, 'num_chains', '')}, {getattr(rk, 'num_sweeps', '')})"}
     for name in filters:
         f = meth[name]
         run = lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1]
@@ -287,7 +296,9 @@ def compare(args) -> str:
             say(line)
     say()
     if "glmb" in filters and "glmb_hypotheses" in o.files:
-        say(f"jaxtrack's δ-GLMB keeps H = {int(o['glmb_hypotheses'])} hypotheses (the study: 128)")
+        say(f"jaxtrack's δ-GLMB keeps H = {int(o['glmb_hypotheses'])} hypotheses (the study: 128)"
+            + (f"; both filters gate at {float(o['gate']):.3g} σ (the study: 4)" if "gate" in o.files else "")
+            + (f"; ranking {o['glmb_ranking']} (the study: GibbsSampling(2, 8))" if "glmb_ranking" in o.files else ""))
     stats = {}
     for name in filters:
         r = np.load(refs[name]) if os.path.exists(refs[name]) else {}
@@ -411,6 +422,10 @@ def main():
     p.add_argument("--glmb-hypotheses", type=int, default=None,
                    help="jaxtrack's δ-GLMB hypothesis budget H (default the study's, 128)")
     p.add_argument("--filters", default="glmb,lmb", help="jaxtrack's filters to run in --stage ours")
+    p.add_argument("--gibbs", default=None, help="the δ-GLMB's Gibbs sampler, CHAINSxSWEEPS per prior hypothesis "
+                   "(default the study's, 2x8)")
+    p.add_argument("--gate", type=float, default=None,
+                   help="jaxtrack's Mahalanobis gate in σ (default the study's, 4; the port's is sqrt(32.24) = 5.68)")
     p.add_argument("--tag", default="", help="suffix of jaxtrack's result file (ours{TAG}.npz) and of --out's default")
     p.add_argument("--out", default=None, help="default benchmarks/measured/labelled_reference{TAG}.txt")
     args = p.parse_args()
@@ -427,7 +442,8 @@ def main():
         export(args.runs, args.workdir)
     if "ours" in stages:
         ours(args.workdir, args.ours_runs, glmb_hypotheses=args.glmb_hypotheses,
-             filters=[f for f in args.filters.split(",") if f], tag=args.tag)
+             filters=[f for f in args.filters.split(",") if f], tag=args.tag, gate=args.gate,
+             gibbs=args.gibbs)
     if "reference" in stages:
         reference(args)
     if "compare" in stages:

@@ -678,11 +678,11 @@ def relaxed_sensor_schedule(
       and where none of these improves, one full evaluation takes an exchange the estimate missed
       or certifies the stop. The result is a local optimum of the same neighbourhood, reached by
       another path. Measured (``benchmarks/measured/sensor_management.txt``, 8 targets, 40 scans,
-      2 shared cores): with 3 sensors the default takes 19.4 s (``J`` 2.58 % below greedy) and
-      ``exchanges=32, starts=1`` 2.1 s (1.46 % below), Stone Soup's brute force 12.2 s; with 4
-      sensors (4096 joint looks a scan for the brute force) ``exchanges=32, starts=1`` takes 3.6 s
-      (7.8 % below greedy) against Stone Soup's 128 s; with 1 sensor and 5 targets it takes 0.44 s
-      against Stone Soup's 0.12 s.
+      2 shared cores): with 3 sensors the default takes 17.3 s (``J`` 2.58 % below greedy) and
+      ``exchanges=32, starts=1`` 1.4 s (1.46 % below), Stone Soup's brute force 11.9 s; with 4
+      sensors (4096 joint looks a scan for the brute force) ``exchanges=32, starts=1`` takes 2.3 s
+      (7.8 % below greedy) against Stone Soup's 118 s; with 1 sensor and 5 targets it takes 0.54 s
+      against Stone Soup's 0.15 s.
 
     **Returns:** :class:`SensorScheduleDesign`.
 
