@@ -24,15 +24,17 @@ from ._rates import (
     maneuver_period_change as maneuver_period_change,
     per_step_design as per_step_design,
 )
-from ._sensor_management import (
+from ._schedule_simulation import (
     ScheduleSimulation as ScheduleSimulation,
+    simulate_sensor_schedule as simulate_sensor_schedule,
+)
+from ._sensor_management import (
     SensorScheduleDesign as SensorScheduleDesign,
     SensorSchedulingProblem as SensorSchedulingProblem,
     greedy_sensor_schedule as greedy_sensor_schedule,
     relaxed_schedule_cost as relaxed_schedule_cost,
     relaxed_sensor_schedule as relaxed_sensor_schedule,
     schedule_cost as schedule_cost,
-    simulate_sensor_schedule as simulate_sensor_schedule,
 )
 from ._schedules import (
     NewtonResult as NewtonResult,
