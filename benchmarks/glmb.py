@@ -8,7 +8,8 @@ Mahalanobis gate of ``--gate`` (default 4), ``--tracks`` slots, ``--hypotheses``
 hypotheses, ``--columns`` gated measurement columns and the LMB's ``--existence-threshold``
 (default 1e-5, the library's); the hypotheses come from ``--ranking murty`` (``MurtyRanking()``,
 the default) or ``--ranking gibbs`` (``GibbsSampling(--chains, --sweeps, seed=--gibbs-seed)``:
-per prior hypothesis ``1 + chains·sweeps`` samples).
+``H·chains`` chains of ``sweeps`` samples shared over the prior hypotheses by ``√w``, plus each
+one's best).
 
 Timed (after a warm-up call; compilation reported separately; best of ``--repeats``):
 
@@ -122,7 +123,7 @@ def main():
     p.add_argument("--repeats", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--ranking", choices=("murty", "gibbs"), default="murty")
-    p.add_argument("--chains", type=int, default=4, help="Gibbs: chains per prior hypothesis")
+    p.add_argument("--chains", type=int, default=4, help="Gibbs: chains per prior hypothesis slot (H·chains in all, shared by sqrt(w))")
     p.add_argument("--sweeps", type=int, default=8, help="Gibbs: sweeps per chain (each a sample)")
     p.add_argument("--gibbs-seed", type=int, default=0)
     p.add_argument("--filters", nargs="+", choices=("GLMB", "LMB"), default=["GLMB", "LMB"])
@@ -133,7 +134,7 @@ def main():
     truth, alive = trajs.states[..., :2], trajs.alive
     print(f"vo_vo_linear: {scen.num_steps} scans, {args.runs} runs, M = {scen.max_measurements} slots; "
           f"H = {args.hypotheses}, N = {args.tracks}, A = {args.columns}, gate {args.gate}; ranking {args.ranking}"
-          + (f" ({args.chains} chains x {args.sweeps} sweeps per prior hypothesis)" if args.ranking == "gibbs" else "")
+          + (f" ({args.chains} chains x {args.sweeps} sweeps per prior hypothesis slot)" if args.ranking == "gibbs" else "")
           + f"; device {jax.devices()[0]}")
     for name, f in _filters(scen, st, args).items():
         one = jax.jit(lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1])

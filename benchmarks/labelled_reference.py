@@ -57,7 +57,8 @@ How the filters differ (same model numbers; settings of each left at its own def
 - δ-GLMB, reference: H_upd = 1000 Gibbs samples a scan (the port's gibbswrap_jointpredupdt_custom, first
   sample all-missed), shared over the prior hypotheses in proportion to sqrt(w); H_max = 1000 kept,
   pruned below 1e-15; gate chi2(2) with P_G = 1 - 1e-7 (NIS < 32.2, 5.7 sigma); no cap on tracks.
-  jaxtrack (the study's): H = 128 hypotheses, GibbsSampling(2 chains x 8 sweeps) per prior hypothesis,
+  jaxtrack (the study's): H = 128 hypotheses, GibbsSampling(2 chains x 8 sweeps per prior hypothesis slot, 256 chains
+  shared over the prior hypotheses in proportion to sqrt(w), as the reference shares its samples),
   gate NIS < 16 (4 sigma), at most A = 24 gated measurement columns, N = 16 track slots.
   Estimator of both: the MAP cardinality, then the heaviest hypothesis of that cardinality, its tracks'
   means (the reference's per-scan value, recorded as each scan ends; its end-of-run output, whose
@@ -82,7 +83,7 @@ def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs:
     montecarlo = importlib.import_module("jaxtrack.applications.vo_vo.montecarlo")
     if gate is not None:  # the study's filters with another Mahalanobis gate (read when they are built)
         study.GATE = gate
-    if gibbs is not None:  # the δ-GLMB's Gibbs sampler with other chains × sweeps per prior hypothesis
+    if gibbs is not None:  # the δ-GLMB's Gibbs sampler with other chains (per prior hypothesis slot) × sweeps
         from jaxtrack.multitarget import GibbsSampling
 
         chains, sweeps = (int(x) for x in gibbs.split("x"))
@@ -422,7 +423,7 @@ def main():
     p.add_argument("--glmb-hypotheses", type=int, default=None,
                    help="jaxtrack's δ-GLMB hypothesis budget H (default the study's, 128)")
     p.add_argument("--filters", default="glmb,lmb", help="jaxtrack's filters to run in --stage ours")
-    p.add_argument("--gibbs", default=None, help="the δ-GLMB's Gibbs sampler, CHAINSxSWEEPS per prior hypothesis "
+    p.add_argument("--gibbs", default=None, help="the δ-GLMB's Gibbs sampler, CHAINSxSWEEPS (chains per prior hypothesis slot, shared by sqrt(w)) "
                    "(default the study's, 2x8)")
     p.add_argument("--gate", type=float, default=None,
                    help="jaxtrack's Mahalanobis gate in σ (default the study's, 4; the port's is sqrt(32.24) = 5.68)")

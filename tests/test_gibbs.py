@@ -32,7 +32,7 @@ from test_glmb import (
 
 from jaxtrack import InputError
 from jaxtrack.association import gibbs_assignments, k_best_assignments
-from jaxtrack.association._gibbs import _chain
+from jaxtrack.association._gibbs import _allocate, _chain
 from jaxtrack.filters import KalmanFilter
 from jaxtrack.multitarget import GLMB, LMB, GibbsSampling, MurtyRanking
 
@@ -132,6 +132,32 @@ def test_chain_samples_the_exact_distribution(seed):
     assert np.all(np.abs(counts - expected) <= 4.5 * sd + 1.0), np.max(np.abs(counts - expected) / sd)
 
 
+def test_chains_are_shared_in_proportion_to_a_power_of_the_parent_weight():
+    # w = (4, 1, [invalid], 1, [infeasible: +inf offset]): √w shares 2:1:0:1:0 of T = 8 chains,
+    # equal shares (α = 0) 1:1:0:1:0 of T = 9; an offset shift changes nothing (only ratios
+    # count), and with no feasible parent all chains fall on parent 0 (dropped by the caller).
+    offsets = -np.log(np.array([4.0, 1.0, 1.0, 1.0, 1.0])) + 700.0
+    feasible = np.array([True, True, False, True, False])
+    counts = lambda alpha, T, o=offsets, f=feasible: np.bincount(
+        np.asarray(_allocate(jnp.asarray(o), jnp.asarray(f), alpha, T)), minlength=5).tolist()
+    assert counts(0.5, 8) == [4, 2, 0, 2, 0]
+    assert counts(0.0, 9) == [3, 3, 0, 3, 0]
+    assert counts(1.0, 12) == [8, 2, 0, 2, 0]
+    assert counts(0.5, 8, o=np.where(feasible, offsets, np.inf)) == [4, 2, 0, 2, 0]
+    assert counts(0.5, 4, f=np.zeros(5, bool)) == [4, 0, 0, 0, 0]
+    # Through the sampler: every sample of a 3-parent problem whose only valid parent is the last
+    # one is that parent's (3·4 chains of 2 sweeps: up to 1 + 24 distinct solutions of it).
+    rng = np.random.default_rng(9)
+    cost, offs = _problem(rng, 3, 3, 3)
+    sol = gibbs_assignments(cost, 40, key=jax.random.key(1), num_chains=4, num_sweeps=2, offsets=offs,
+                            valid_parents=np.array([False, False, True]))
+    assert np.all(np.asarray(sol.parent)[np.asarray(sol.valid)] == 2) and int(sol.num_solutions) > 1 + 4 * 2  # more than 4 chains of 2 sweeps could give
+    with pytest.raises(InputError, match="weight_exponent"):
+        gibbs_assignments(cost, 4, key=jax.random.key(1), num_chains=1, num_sweeps=1, weight_exponent=-1.0)
+    with pytest.raises(InputError, match="weight_exponent"):
+        GibbsSampling(2, 2, weight_exponent=float("nan"))
+
+
 # ------------------------------------------------------------------------------------------------ δ-GLMB
 H_GIBBS = 64
 
@@ -149,7 +175,7 @@ def _step(f, state, z, v):
 
 
 # Cases with at most H = 64 enumerated hypotheses, none of normalised weight below 3e-3 (found by
-# enumeration over seeds): the samples (1 + 64·32 per prior hypothesis) then cover them all, and
+# enumeration over seeds): the samples (64 chains of 32 sweeps per prior hypothesis slot, shared over the few valid ones) then cover them all, and
 # the δ-GLMB is exact, as with Murty. A hypothesis of weight 1e-8 would almost never be drawn:
 # Gibbs finds what carries weight, not the whole tail.
 @pytest.mark.parametrize("seed,one_birth,m1,m2", [(78, True, 2, 2), (34, True, 1, 2)])
@@ -235,7 +261,8 @@ def test_jits_vmaps_and_is_reproducible():
     # More asked than sampled: padded with invalid rows; an invalid parent gives nothing.
     few = gibbs_assignments(cost[0], 40, key=keys[0], num_chains=1, num_sweeps=2, offsets=offsets[0],
                             valid_parents=np.array([True, False]))
-    assert few.valid.shape == (40,) and int(few.num_solutions) <= 3
+    # (Both chains go to the one valid parent: at most 1 + 2·2 distinct samples.)
+    assert few.valid.shape == (40,) and int(few.num_solutions) <= 5
     assert np.all(np.asarray(few.parent)[np.asarray(few.valid)] == 0)
     assert np.all(np.isinf(np.asarray(few.total_cost)[~np.asarray(few.valid)]))
     # The default ranking is Murty's.
