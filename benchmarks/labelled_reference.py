@@ -76,7 +76,8 @@ How the filters differ (same model numbers; settings of each left at its own def
 
 # --------------------------------------------------------------------------- export / ours (jaxtrack)
 
-def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs: str | None = None):
+def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs: str | None = None,
+           lmb_gibbs: str | None = None, lmb_hypotheses: int | None = None):
     import importlib
 
     study = importlib.import_module("jaxtrack.applications.vo_vo.scenario")
@@ -88,6 +89,13 @@ def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs:
 
         chains, sweeps = (int(x) for x in gibbs.split("x"))
         study.GLMB_RANKING = GibbsSampling(chains, sweeps, seed=study.GLMB_RANKING.seed)
+    if lmb_gibbs is not None:  # the LMB's hypotheses by Gibbs sampling (one prior hypothesis: all chains its)
+        from jaxtrack.multitarget import GibbsSampling
+
+        chains, sweeps = (int(x) for x in lmb_gibbs.split("x"))
+        study.LMB_RANKING = GibbsSampling(chains, sweeps, seed=0)
+    if lmb_hypotheses is not None:
+        study.MAX_HYPOTHESES = dict(study.MAX_HYPOTHESES, lmb=lmb_hypotheses)
     scen, settings = study.scenario()
     meth = study.methods(scen, settings)
     if glmb_hypotheses is not None:  # the study's δ-GLMB at another hypothesis budget
@@ -122,18 +130,22 @@ def export(runs: int, workdir: str) -> str:
 
 
 def ours(workdir: str, runs: int | None = None, repeats: int = 2, glmb_hypotheses: int | None = None,
-         filters=FILTERS, tag: str = "", gate: float | None = None, gibbs: str | None = None) -> str:
+         filters=FILTERS, tag: str = "", gate: float | None = None, gibbs: str | None = None,
+         lmb_gibbs: str | None = None, lmb_hypotheses: int | None = None) -> str:
     import jax
 
     from jaxtrack.multitarget._base import _record_estimates, scan_method
 
-    _, _, meth, _ = _study(glmb_hypotheses, gate, gibbs)
+    _, _, meth, _ = _study(glmb_hypotheses, gate, gibbs, lmb_gibbs, lmb_hypotheses)
     d = np.load(os.path.join(workdir, "runs.npz"))
     z, v = jax.numpy.asarray(d["z"][:runs]), jax.numpy.asarray(d["valid"][:runs])
     R = z.shape[0]
     rk = meth["glmb"].ranking
+    lrk = meth["lmb"].ranking
     out = {"glmb_hypotheses": meth["glmb"].max_hypotheses, "gate": float(meth["glmb"].gate),
-           "glmb_ranking": f"{type(rk).__name__}({getattr(rk, 'num_chains', '')}, {getattr(rk, 'num_sweeps', '')})"}
+           "glmb_ranking": f"{type(rk).__name__}({getattr(rk, 'num_chains', '')}, {getattr(rk, 'num_sweeps', '')})",
+           "lmb_hypotheses": meth["lmb"].max_hypotheses,
+           "lmb_ranking": f"{type(lrk).__name__}({getattr(lrk, 'num_chains', '')}, {getattr(lrk, 'num_sweeps', '')})"}
     for name in filters:
         f = meth[name]
         run = lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1]
@@ -300,6 +312,9 @@ def compare(args) -> str:
         say(f"jaxtrack's δ-GLMB keeps H = {int(o['glmb_hypotheses'])} hypotheses (the study: 128)"
             + (f"; both filters gate at {float(o['gate']):.3g} σ (the study: 4)" if "gate" in o.files else "")
             + (f"; ranking {o['glmb_ranking']} (the study: GibbsSampling(2, 8))" if "glmb_ranking" in o.files else ""))
+    if "lmb" in filters and "lmb_hypotheses" in o.files:
+        say(f"jaxtrack's LMB keeps H = {int(o['lmb_hypotheses'])} hypotheses, ranking {o['lmb_ranking']} "
+            "(the study: 32, MurtyRanking())")
     stats = {}
     for name in filters:
         r = np.load(refs[name]) if os.path.exists(refs[name]) else {}
@@ -425,6 +440,9 @@ def main():
     p.add_argument("--filters", default="glmb,lmb", help="jaxtrack's filters to run in --stage ours")
     p.add_argument("--gibbs", default=None, help="the δ-GLMB's Gibbs sampler, CHAINSxSWEEPS (chains per prior hypothesis slot, shared by sqrt(w)) "
                    "(default the study's, 2x8)")
+    p.add_argument("--lmb-gibbs", default=None, help="the LMB's hypotheses by GibbsSampling(CHAINS, SWEEPS), given "
+                   "as CHAINSxSWEEPS (default the study's: Murty)")
+    p.add_argument("--lmb-hypotheses", type=int, default=None, help="jaxtrack's LMB hypothesis budget (default the study's, 32)")
     p.add_argument("--gate", type=float, default=None,
                    help="jaxtrack's Mahalanobis gate in σ (default the study's, 4; the port's is sqrt(32.24) = 5.68)")
     p.add_argument("--tag", default="", help="suffix of jaxtrack's result file (ours{TAG}.npz) and of --out's default")
@@ -444,7 +462,7 @@ def main():
     if "ours" in stages:
         ours(args.workdir, args.ours_runs, glmb_hypotheses=args.glmb_hypotheses,
              filters=[f for f in args.filters.split(",") if f], tag=args.tag, gate=args.gate,
-             gibbs=args.gibbs)
+             gibbs=args.gibbs, lmb_gibbs=args.lmb_gibbs, lmb_hypotheses=args.lmb_hypotheses)
     if "reference" in stages:
         reference(args)
     if "compare" in stages:

@@ -158,6 +158,33 @@ def test_chains_are_shared_in_proportion_to_a_power_of_the_parent_weight():
         GibbsSampling(2, 2, weight_exponent=float("nan"))
 
 
+@jax.jit
+def _first_draws(cost, start, key):
+    keys = jax.random.split(key, N_CHAINS)
+    return jax.vmap(_chain, in_axes=(None, None, None, 0, None))(cost, jnp.isfinite(cost), start, keys, 1)[:, 0]
+
+
+def test_a_draw_whose_free_weights_underflow_is_still_exact():
+    # Row 0's cheapest column (0) is held by row 1 and every other column of row 0 costs 800 nats
+    # more, so its free weights exp(−(cost − row min)) underflow to 0: the sampler must redo the
+    # draw in log space. Row 0's first draw (the first of the sweep, given θ_{−0} = (0, 5)) is
+    # then ∝ exp(−cost[0, c]) over its free columns; χ² at the 0.9999 quantile. Without the
+    # log-space path every draw lands on a forbidden column.
+    rng = np.random.default_rng(3)
+    cost, _ = _problem(rng, 1, 3, 3, forbid=0.0)
+    cost = cost[0]
+    cost[0, 0], cost[1, 0] = 0.0, 0.5
+    cost[0, 1:] += 800.0
+    row0 = np.asarray(_first_draws(cost, jnp.array([3, 0, 5], jnp.int32), jax.random.key(4)))[:, 0]
+    free = [c for c in range(cost.shape[1]) if np.isfinite(cost[0, c]) and c not in (0, 5)]
+    assert set(row0.tolist()) <= set(free), sorted(set(row0.tolist()))
+    logw = -cost[0, free]
+    prob = np.exp(logw - logw.max()) / np.exp(logw - logw.max()).sum()
+    counts = np.array([np.sum(row0 == c) for c in free])
+    chi2 = float(np.sum((counts - N_CHAINS * prob) ** 2 / (N_CHAINS * prob)))
+    assert chi2 < float(stats.chi2.ppf(0.9999, len(free) - 1)), (chi2, counts, N_CHAINS * prob)
+
+
 # ------------------------------------------------------------------------------------------------ δ-GLMB
 H_GIBBS = 64
 

@@ -34,40 +34,75 @@ def _check_key(key) -> Array:
 def _chain(work, allowed, start, key, num_sweeps):
     """One chain on one ``(R, C)`` cost matrix: ``num_sweeps`` systematic scans over the rows from
     the injective assignment ``start`` ``(R,)``. **Returns** the state after each sweep
-    ``(num_sweeps, R)`` int32.
+    ``(num_sweeps, R)`` int32. (:func:`_chains` for one chain.)"""
+    return _chains(work[None], allowed[None], start[None], key[None], num_sweeps)[0]
+
+
+def _chains(work, allowed, start, keys, num_sweeps):
+    """``T`` independent chains at once, chain ``t`` on the ``(R, C)`` cost matrix ``work[t]``
+    from the injective assignment ``start[t]`` with the key ``keys[t]``: ``num_sweeps``
+    systematic scans over the rows. **Returns** the state after each sweep ``(T, num_sweeps, R)``
+    int32.
 
     Row ``r``'s full conditional given the other rows ``θ_{−r}`` (VVH17 Sec. IV-B; for the
     δ-GLMB it is ``η_r(j)`` of the joint prediction–update restricted to the measurements the
     other candidates leave free) is ``P(θ_r = c | θ_{−r}) ∝ exp(−cost[r, c])`` over the columns
     ``c`` with a finite cost that no other row holds. The row's own column is always among them,
-    so the chain never leaves the injective, finite assignments."""
-    R, C = work.shape
+    so the chain never leaves the injective, finite assignments.
+
+    Why batched by hand rather than ``vmap`` of one chain: the weights ``exp(−(cost − min_row))``
+    are taken once, not at every draw (the exponentials were most of the sampler's time), and
+    the rare draw whose free weights all underflow (free columns > 700 nats above the row's
+    cheapest) is redone in log space under a ``lax.cond`` on ANY chain, which a vmapped chain
+    would turn into both branches every time."""
+    T, R, C = work.shape
     cols = jnp.arange(C)
+    # Row-wise shift by the cheapest finite entry: the weights are ≤ 1 and the best is 1.
+    lo = jnp.min(jnp.where(allowed, work, jnp.inf), axis=-1, keepdims=True)
+    weights = jnp.where(allowed, jnp.exp(-(work - jnp.where(jnp.isfinite(lo), lo, 0.0))), 0.0)
+    tiny = jnp.finfo(weights.dtype).tiny
     # How many rows hold each column: a row's "taken by the others" is this minus its own.
-    counts0 = jnp.zeros((C,), jnp.int32).at[start].add(1)
+    counts0 = jnp.sum(start[:, :, None] == cols[None, None], axis=1, dtype=jnp.int32)  # (T, C)
+
+    # Cumulative sums as one product with a triangular matrix: XLA:CPU's cumsum of a (T, C) batch
+    # costs about 3x (measured 64 µs against 22 µs a draw at T = 256, C = 64).
+    upper = jnp.triu(jnp.ones((C, C), weights.dtype))
+
+    def draw(w, u):
+        # Inverse-CDF draw with one uniform per row (cheaper than C Gumbels on the CPU): the first
+        # column with a weight whose cumulative weight exceeds u·total. Asking for a weight keeps
+        # the draw on a free column even where the product's rounding makes the sums
+        # non-monotone; past every sum (rounding again) the last free column.
+        cum = w @ upper
+        hit = (cum > u[:, None] * cum[:, -1:]) & (w > 0)
+        last = C - 1 - jnp.argmax((w > 0)[:, ::-1], axis=-1)
+        return jnp.where(jnp.any(hit, axis=-1), jnp.argmax(hit, axis=-1), last).astype(jnp.int32)
 
     def row(r, carry):
         theta, counts, u = carry
-        own = theta[r]
-        free = allowed[r] & ((counts - (cols == own)) == 0)
-        logits = jnp.where(free, -work[r], -jnp.inf)
-        # Inverse-CDF draw with one uniform per row (cheaper than C Gumbels on the CPU): the first
-        # column whose cumulative weight exceeds u·total; its weight is > 0 since u < 1.
-        w = jnp.where(free, jnp.exp(logits - jnp.max(logits)), 0.0)
-        cum = jnp.cumsum(w)
-        c = jnp.minimum(jnp.sum(cum <= u[r] * cum[-1]), C - 1).astype(jnp.int32)
-        counts = counts.at[own].add(-1).at[c].add(1)
-        return theta.at[r].set(c), counts, u
+        own = theta[:, r]
+        mine = cols[None] == own[:, None]
+        free = allowed[:, r] & ((counts - mine) == 0)
+        w = jnp.where(free, weights[:, r], 0.0)
+        underflow = jnp.sum(w, axis=-1) < tiny  # only the own column can keep it from being 0
+
+        def exact(_):
+            logits = jnp.where(free, -work[:, r], -jnp.inf)
+            return jnp.where(free, jnp.exp(logits - jnp.max(logits, axis=-1, keepdims=True)), 0.0)
+
+        w = jax.lax.cond(jnp.any(underflow), exact, lambda _: w, None)
+        c = draw(w, u[:, r])
+        counts = counts - mine + (cols[None] == c[:, None])
+        return theta.at[:, r].set(c), counts, u
 
     def sweep(carry, t):
         theta, counts = carry
-        u = jax.random.uniform(jax.random.fold_in(key, t), (R,), work.dtype)
+        u = jax.vmap(lambda k: jax.random.uniform(jax.random.fold_in(k, t), (R,), work.dtype))(keys)
         theta, counts, _ = jax.lax.fori_loop(0, R, row, (theta, counts, u))
         return (theta, counts), theta
 
     _, states = jax.lax.scan(sweep, (start, counts0), jnp.arange(num_sweeps))
-    return states
-
+    return jnp.swapaxes(states, 0, 1)
 
 def _check_exponent(weight_exponent) -> float:
     """``weight_exponent`` as a finite Python float ``≥ 0`` (it shapes nothing, but a negative one
@@ -202,9 +237,8 @@ def gibbs_assignments(
     start = jnp.where(feasible[:, None], start, jnp.arange(R, dtype=jnp.int32)[None]).astype(jnp.int32)
     T = P * num_chains
     chain_parent = _allocate(jax.lax.stop_gradient(offsets), feasible, alpha, T)
-    per_chain = jax.vmap(_chain, in_axes=(0, 0, 0, 0, None))
-    states = per_chain(work[chain_parent], finite[chain_parent], start[chain_parent],
-                       jax.random.split(key, T), num_sweeps)  # (T, num_sweeps, R)
+    states = _chains(work[chain_parent], finite[chain_parent], start[chain_parent],
+                     jax.random.split(key, T), num_sweeps)  # (T, num_sweeps, R)
     theta = jnp.concatenate([start, states.reshape(T * num_sweeps, R)], axis=0)
     S = P + T * num_sweeps
     parent = jnp.concatenate([jnp.arange(P, dtype=jnp.int32), jnp.repeat(chain_parent, num_sweeps)])

@@ -17,13 +17,14 @@ library's 1e-5 lingering birth labels filled the 16 slots (18 capacity events in
 from __future__ import annotations
 
 from ...filters import KalmanFilter
-from ...multitarget import GLMB, LMB, GibbsSampling, Scenario, VoVoLinearSettings, vo_vo_linear
+from ...multitarget import GLMB, LMB, GibbsSampling, MurtyRanking, Scenario, VoVoLinearSettings, vo_vo_linear
 
 MAX_TRACKS = 16
 MAX_HYPOTHESES = {"glmb": 128, "lmb": 32}
 # Two chains of eight sweeps per prior hypothesis slot: 256 chains a scan, shared over the prior
 # hypotheses in proportion to √w (VVH17; GibbsSampling's docstring), 2,304 samples in all.
 GLMB_RANKING = GibbsSampling(num_chains=2, num_sweeps=8)
+LMB_RANKING = MurtyRanking()
 ASSIGNMENT_MEASUREMENTS = 24
 GATE = 4.0
 LMB_EXISTENCE_THRESHOLD = 1e-3
@@ -51,5 +52,6 @@ def methods(scen: Scenario | None = None, settings: VoVoLinearSettings | None = 
     return {
         "glmb": GLMB(KalmanFilter(), scen.model, max_hypotheses=H["glmb"], ranking=GLMB_RANKING, **common),
         "lmb": LMB(KalmanFilter(), scen.model, max_hypotheses=H["lmb"], existence_threshold=LMB_EXISTENCE_THRESHOLD,
+                   ranking=LMB_RANKING,
                    **common),
     }
