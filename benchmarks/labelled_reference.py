@@ -9,7 +9,7 @@ Steps (``--stage all``, or a comma-separated list of ``export``, ``ours``, ``ref
    (jaxtrack/applications/vo_vo) draws it; the truth, every run's measurement sets and the model's
    numbers go to ``WORKDIR/runs.npz``.
 2. ``ours``: the study's two filters (:func:`jaxtrack.applications.vo_vo.methods`: δ-GLMB with
-   ``GibbsSampling(2, 8)`` at ``H = 128``, LMB with Murty at ``H = 32``, ``N = 16``, gate 4,
+   ``GibbsSampling(2, 8)`` at ``H = 128``, LMB with ``GibbsSampling(64, 16)`` at ``H = 256``, ``N = 16``, gate 4,
    ``A = 24``) over the runs as one ``jit(vmap)`` batch (timed after an ahead-of-time compile:
    per run = wall / runs) and over one run (run 0, ``jit``, best of 2 after a warm-up call; the
    study itself runs one run a block); every scan's estimates go to ``WORKDIR/ours.npz``.
@@ -67,8 +67,8 @@ How the filters differ (same model numbers; settings of each left at its own def
   mixture (pruned below 1e-5, merged within 4, at most 10 components), its estimate the heaviest
   component's mean; tracks pruned at r <= 1e-3, at most 100. Birth: {lmb_birth} ("fixed": the port's
   adaptive measurement-driven birth, Reuter et al. 2014 eq. 75, replaced by the scenario's four-label
-  birth, as in Vo's MATLAB jointlmb and jaxtrack). jaxtrack (the study's): Murty's 32 best
-  assignments, one Gaussian a track (moment matched), r <= 1e-3 pruned, N = 16 slots, same gate and A.
+  birth, as in Vo's MATLAB jointlmb and jaxtrack). jaxtrack (the study's): the 256 best distinct of
+  GibbsSampling(64 chains x 16 sweeps), 1,025 samples, one Gaussian a track (moment matched), r <= 1e-3 pruned, N = 16 slots, same gate and A.
 - Both use P_S, P_D, lambda_c, the clutter region, F, Q, H, R and the birth of vo_vo_linear (the driver
   prints the table of the port's defaults and the values set).
 """
@@ -314,7 +314,7 @@ def compare(args) -> str:
             + (f"; ranking {o['glmb_ranking']} (the study: GibbsSampling(2, 8))" if "glmb_ranking" in o.files else ""))
     if "lmb" in filters and "lmb_hypotheses" in o.files:
         say(f"jaxtrack's LMB keeps H = {int(o['lmb_hypotheses'])} hypotheses, ranking {o['lmb_ranking']} "
-            "(the study: 32, MurtyRanking())")
+            "(the study: 256, GibbsSampling(64, 16))")
     stats = {}
     for name in filters:
         r = np.load(refs[name]) if os.path.exists(refs[name]) else {}
@@ -441,7 +441,7 @@ def main():
     p.add_argument("--gibbs", default=None, help="the δ-GLMB's Gibbs sampler, CHAINSxSWEEPS (chains per prior hypothesis slot, shared by sqrt(w)) "
                    "(default the study's, 2x8)")
     p.add_argument("--lmb-gibbs", default=None, help="the LMB's hypotheses by GibbsSampling(CHAINS, SWEEPS), given "
-                   "as CHAINSxSWEEPS (default the study's: Murty)")
+                   "as CHAINSxSWEEPS (default the study's: 64x16)")
     p.add_argument("--lmb-hypotheses", type=int, default=None, help="jaxtrack's LMB hypothesis budget (default the study's, 32)")
     p.add_argument("--gate", type=float, default=None,
                    help="jaxtrack's Mahalanobis gate in σ (default the study's, 4; the port's is sqrt(32.24) = 5.68)")

@@ -19,7 +19,7 @@ from jaxtrack.applications.vo_vo.scenario import (
     MAX_HYPOTHESES,
     MAX_TRACKS,
 )
-from jaxtrack.multitarget import GLMB, LMB, DeltaGLMB, GibbsSampling, LMBProjection, MurtyRanking
+from jaxtrack.multitarget import GLMB, LMB, DeltaGLMB, GibbsSampling, LMBProjection
 
 
 def test_the_filters_are_what_the_study_says():
@@ -28,10 +28,11 @@ def test_the_filters_are_what_the_study_says():
     assert tuple(m) == vo_vo.METHODS == ("glmb", "lmb")
     assert isinstance(m["glmb"], GLMB) and isinstance(m["glmb"].projection, DeltaGLMB)
     assert isinstance(m["lmb"], LMB) and isinstance(m["lmb"].projection, LMBProjection)
-    assert MAX_HYPOTHESES == {"glmb": 128, "lmb": 32}
+    assert MAX_HYPOTHESES == {"glmb": 128, "lmb": 256}
     assert isinstance(m["glmb"].ranking, GibbsSampling)
     assert (m["glmb"].ranking.num_chains, m["glmb"].ranking.num_sweeps) == (2, 8)
-    assert isinstance(m["lmb"].ranking, MurtyRanking)
+    assert isinstance(m["lmb"].ranking, GibbsSampling)
+    assert (m["lmb"].ranking.num_chains, m["lmb"].ranking.num_sweeps) == (64, 16)
     for name, f in m.items():
         assert (f.max_tracks, f.max_hypotheses, f.assignment_measurements) == (MAX_TRACKS, MAX_HYPOTHESES[name],
                                                                               ASSIGNMENT_MEASUREMENTS)

@@ -40,8 +40,7 @@ class MurtyRanking(AbstractLabelledRanking):
     Sec. IV-A). Exact; costs ``O(K·P³·(A + 2P))`` per scan. The default."""
 
     def hypotheses(self, cost, num, offsets, valid_parents, step):
-        return k_best_assignments(cost, num, offsets=offsets, valid_parents=valid_parents,
-                                 weight_exponent=self.weight_exponent)
+        return k_best_assignments(cost, num, offsets=offsets, valid_parents=valid_parents)
 
 
 class GibbsSampling(AbstractLabelledRanking):

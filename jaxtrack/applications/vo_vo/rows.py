@@ -17,19 +17,21 @@ from .figures import figure_study
 from .montecarlo import DEFAULT_RUNS, VoVoStudy, run_study
 from .scenario import LABELS, METHODS
 
-# Margins. Measured with 20 runs (key 13) at the study's budgets (N = 16; δ-GLMB H = 128 by Gibbs
-# sampling, LMB H = 32 by Murty), 160 s for both filters on 2 cores (2026-12-07): time-averaged
-# GOSPA mean (upper 95%) 87.3 (98.2) m δ-GLMB, 84.9 (95.7) m LMB; mean |cardinality bias| 0.30
-# (bias −0.23) and 0.22 (−0.16); track switches a run 11.7 and 8.35 (breaks 2.35, 2.45); no
-# capacity event. The margins leave about 15% (GOSPA) and 20–35% (cardinality, switches).
+# Margins. Measured with 20 runs (key 13) at the study's budgets (N = 16; δ-GLMB H = 128, LMB
+# H = 256, both by Gibbs sampling), 117 s for both filters on one core (2026-12-07): time-averaged
+# GOSPA mean (upper 95%) 87.5 (98.3) m δ-GLMB, 84.5 (95.0) m LMB; mean |cardinality bias| 0.30 and
+# 0.21; track switches a run 12.3 and 9.15 (breaks 2.10, 2.60); no capacity event. (With the LMB by
+# Murty at H = 32 and the δ-GLMB's chains per prior-hypothesis slot: 87.3 (98.2), 84.9 (95.7) m,
+# 0.30 and 0.22, 11.7 and 8.35 switches, 160 s on 2 cores.) The margins leave about 15% (GOSPA,
+# switches) and 25–40% (cardinality).
 # With Murty's 32 best hypotheses the δ-GLMB was much the worse of the two (GOSPA 110.8 (125.2) m,
 # |cardinality bias| 0.83, switches 10.5; 192 s for both), by truncation: traced on run 2 (4 to 5
 # targets lost from scan 40 on), target 7 is born and detected at scan 39 (its label in every top
 # hypothesis), missed at scan 40 (P_D = 0.98): its "missed" hypotheses weigh P_S (1 − P_D) ≈ 0.02
 # of their parents and fell out of the 32 best, whose budget went to history variants of the same
 # label set; at scan 41 it is detected 40 m from the birth point, where the fixed birth (σ = 10 m)
-# cannot start it again. Gibbs sampling gives every prior hypothesis its own chains, so such
-# low-weight children are drawn, and 128 of them cost less than Murty's 32 (benchmarks/glmb.py).
+# cannot start it again. Gibbs sampling gives every prior hypothesis its best child and chains in
+# proportion to √w, so such low-weight children are drawn, and 128 of them cost less than Murty's 32 (benchmarks/glmb.py).
 # The papers' δ-GLMB keeps hundreds to thousands of hypotheses.
 GOSPA_MARGIN = {"glmb": 113.0, "lmb": 110.0}
 CARDINALITY_MARGIN = {"glmb": 0.4, "lmb": 0.3}
