@@ -50,6 +50,13 @@ error are deterministic, equal in both runs):
 | LMB, Gibbs | 256 | 32 × 16 | 1.0 s | 0.54 s | 13.32 m | 82.95 m | 0.250 (1 capacity event) |
 | LMB, Gibbs | 512 | 64 × 16 | 1.2 s | 1.4 s | 13.23 m | 82.51 m | 0.234 (3 capacity events) |
 
+Since 2026-12-07 21:00 the chains are one budget of ``H·chains`` shared over the prior hypotheses by
+``√w`` (not ``chains`` per slot), so the Gibbs rows above are of the earlier sampler. Rerun on the
+same 8 runs (benchmarks/measured/glmb_gibbs.txt, end): GLMB 128, 2 × 8: 2.3 s one run, 16.32 m,
+GOSPA 95.98 m, cardinality error 0.549 (worse on these 8 runs; on the study's 100 runs against the
+labeledRFS port, better: OSPA 14.78 against 16.23 m, benchmarks/measured/labelled_reference.txt);
+GLMB 512, 1 × 4: 5.8 s, 12.79 m, 80.76 m, 0.215; LMB 256, 64 × 16: 0.80 s, 13.23 m, 82.51 m, 0.234.
+
 Gibbs at ``H = 128`` is faster than Murty at ``H = 32`` (no ``P³`` subproblems, a batch no longer
 waits for the slowest run's ``while_loop``) and closes most of the gap to the LMB (OSPA 18.5 →
 14.8 m, cardinality error 0.77 → 0.38). Only ``H = 512`` matches the LMB (13.3 m), at 4× Murty's

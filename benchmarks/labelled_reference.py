@@ -87,8 +87,9 @@ def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs:
     if gibbs is not None:  # the δ-GLMB's Gibbs sampler with other chains (per prior hypothesis slot) × sweeps
         from jaxtrack.multitarget import GibbsSampling
 
-        chains, sweeps = (int(x) for x in gibbs.split("x"))
-        study.GLMB_RANKING = GibbsSampling(chains, sweeps, seed=study.GLMB_RANKING.seed)
+        chains, sweeps, *alpha = gibbs.split("x")
+        study.GLMB_RANKING = GibbsSampling(int(chains), int(sweeps), seed=study.GLMB_RANKING.seed,
+                                           weight_exponent=float(alpha[0]) if alpha else 0.5)
     if lmb_gibbs is not None:  # the LMB's hypotheses by Gibbs sampling (one prior hypothesis: all chains its)
         from jaxtrack.multitarget import GibbsSampling
 
@@ -143,7 +144,8 @@ def ours(workdir: str, runs: int | None = None, repeats: int = 2, glmb_hypothese
     rk = meth["glmb"].ranking
     lrk = meth["lmb"].ranking
     out = {"glmb_hypotheses": meth["glmb"].max_hypotheses, "gate": float(meth["glmb"].gate),
-           "glmb_ranking": f"{type(rk).__name__}({getattr(rk, 'num_chains', '')}, {getattr(rk, 'num_sweeps', '')})",
+           "glmb_ranking": f"{type(rk).__name__}({getattr(rk, 'num_chains', '')}, {getattr(rk, 'num_sweeps', '')}"
+                           + (f", weight_exponent={rk.weight_exponent}" if hasattr(rk, "weight_exponent") else "") + ")",
            "lmb_hypotheses": meth["lmb"].max_hypotheses,
            "lmb_ranking": f"{type(lrk).__name__}({getattr(lrk, 'num_chains', '')}, {getattr(lrk, 'num_sweeps', '')})"}
     for name in filters:
@@ -438,7 +440,7 @@ def main():
     p.add_argument("--glmb-hypotheses", type=int, default=None,
                    help="jaxtrack's δ-GLMB hypothesis budget H (default the study's, 128)")
     p.add_argument("--filters", default="glmb,lmb", help="jaxtrack's filters to run in --stage ours")
-    p.add_argument("--gibbs", default=None, help="the δ-GLMB's Gibbs sampler, CHAINSxSWEEPS (chains per prior hypothesis slot, shared by sqrt(w)) "
+    p.add_argument("--gibbs", default=None, help="the δ-GLMB's Gibbs sampler, CHAINSxSWEEPS[xALPHA] (chains per prior hypothesis slot, shared by w^ALPHA, default 0.5) "
                    "(default the study's, 2x8)")
     p.add_argument("--lmb-gibbs", default=None, help="the LMB's hypotheses by GibbsSampling(CHAINS, SWEEPS), given "
                    "as CHAINSxSWEEPS (default the study's: 64x16)")
