@@ -51,7 +51,9 @@ def _chains(work, allowed, start, keys, num_sweeps):
     so the chain never leaves the injective, finite assignments.
 
     Why batched by hand rather than ``vmap`` of one chain: the weights ``exp(−(cost − min_row))``
-    are taken once, not at every draw (the exponentials were most of the sampler's time), and
+    are taken once, not at every draw, the cumulative sums are one matrix product (with the
+    batching, 19 → 15 ms a δ-GLMB scan at H = 128; what is left is the R·num_sweeps sequential row
+    steps, not their width), and
     the rare draw whose free weights all underflow (free columns > 700 nats above the row's
     cheapest) is redone in log space under a ``lax.cond`` on ANY chain, which a vmapped chain
     would turn into both branches every time."""
@@ -122,7 +124,7 @@ def _allocate(offsets, feasible, alpha, T):
     share = jnp.where(feasible, jnp.exp(-alpha * (offsets - jnp.where(jnp.isfinite(lo), lo, 0.0))), 0.0)
     cum = jnp.cumsum(share)
     u = (jnp.arange(T, dtype=cum.dtype) + 0.5) / T * cum[-1]
-    p = jnp.sum(cum[None, :] <= u[:, None], axis=1)
+    p = jnp.searchsorted(cum, u, side="right")  # how many cumulative shares are ≤ u
     return jnp.where(cum[-1] > 0, jnp.minimum(p, offsets.shape[0] - 1), 0).astype(jnp.int32)
 
 
