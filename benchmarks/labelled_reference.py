@@ -68,7 +68,9 @@ How the filters differ (same model numbers; settings of each left at its own def
   component's mean; tracks pruned at r <= 1e-3, at most 100. Birth: {lmb_birth} ("fixed": the port's
   adaptive measurement-driven birth, Reuter et al. 2014 eq. 75, replaced by the scenario's four-label
   birth, as in Vo's MATLAB jointlmb and jaxtrack). jaxtrack (the study's): the 256 best distinct of
-  GibbsSampling(64 chains x 16 sweeps), 1,025 samples, one Gaussian a track (moment matched), r <= 1e-3 pruned, N = 16 slots, same gate and A.
+  GibbsSampling(64 chains x 16 sweeps), 1,025 samples; each track a Gaussian mixture (pruned below 1e-5,
+  merged within 4, at most 10 components: LMB_COMPONENTS; --lmb-components 1 gives one moment-matched
+  Gaussian), its estimate the heaviest component's mean; r <= 1e-3 pruned, N = 16 slots, same gate and A.
 - Both use P_S, P_D, lambda_c, the clutter region, F, Q, H, R and the birth of vo_vo_linear (the driver
   prints the table of the port's defaults and the values set).
 """
@@ -77,7 +79,7 @@ How the filters differ (same model numbers; settings of each left at its own def
 # --------------------------------------------------------------------------- export / ours (jaxtrack)
 
 def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs: str | None = None,
-           lmb_gibbs: str | None = None, lmb_hypotheses: int | None = None):
+           lmb_gibbs: str | None = None, lmb_hypotheses: int | None = None, lmb_components: int | None = None):
     import importlib
 
     study = importlib.import_module("jaxtrack.applications.vo_vo.scenario")
@@ -97,6 +99,8 @@ def _study(glmb_hypotheses: int | None = None, gate: float | None = None, gibbs:
         study.LMB_RANKING = GibbsSampling(chains, sweeps, seed=0)
     if lmb_hypotheses is not None:
         study.MAX_HYPOTHESES = dict(study.MAX_HYPOTHESES, lmb=lmb_hypotheses)
+    if lmb_components is not None:  # the Gaussian components each LMB label keeps
+        study.LMB_COMPONENTS = lmb_components
     scen, settings = study.scenario()
     meth = study.methods(scen, settings)
     if glmb_hypotheses is not None:  # the study's δ-GLMB at another hypothesis budget
@@ -132,12 +136,12 @@ def export(runs: int, workdir: str) -> str:
 
 def ours(workdir: str, runs: int | None = None, repeats: int = 2, glmb_hypotheses: int | None = None,
          filters=FILTERS, tag: str = "", gate: float | None = None, gibbs: str | None = None,
-         lmb_gibbs: str | None = None, lmb_hypotheses: int | None = None) -> str:
+         lmb_gibbs: str | None = None, lmb_hypotheses: int | None = None, lmb_components: int | None = None) -> str:
     import jax
 
     from jaxtrack.multitarget._base import _record_estimates, scan_method
 
-    _, _, meth, _ = _study(glmb_hypotheses, gate, gibbs, lmb_gibbs, lmb_hypotheses)
+    _, _, meth, _ = _study(glmb_hypotheses, gate, gibbs, lmb_gibbs, lmb_hypotheses, lmb_components)
     d = np.load(os.path.join(workdir, "runs.npz"))
     z, v = jax.numpy.asarray(d["z"][:runs]), jax.numpy.asarray(d["valid"][:runs])
     R = z.shape[0]
@@ -146,7 +150,7 @@ def ours(workdir: str, runs: int | None = None, repeats: int = 2, glmb_hypothese
     out = {"glmb_hypotheses": meth["glmb"].max_hypotheses, "gate": float(meth["glmb"].gate),
            "glmb_ranking": f"{type(rk).__name__}({getattr(rk, 'num_chains', '')}, {getattr(rk, 'num_sweeps', '')}"
                            + (f", weight_exponent={rk.weight_exponent}" if hasattr(rk, "weight_exponent") else "") + ")",
-           "lmb_hypotheses": meth["lmb"].max_hypotheses,
+           "lmb_hypotheses": meth["lmb"].max_hypotheses, "lmb_components": meth["lmb"].projection.max_components,
            "lmb_ranking": f"{type(lrk).__name__}({getattr(lrk, 'num_chains', '')}, {getattr(lrk, 'num_sweeps', '')})"}
     for name in filters:
         f = meth[name]
@@ -315,8 +319,9 @@ def compare(args) -> str:
             + (f"; both filters gate at {float(o['gate']):.3g} σ (the study: 4)" if "gate" in o.files else "")
             + (f"; ranking {o['glmb_ranking']} (the study: GibbsSampling(2, 8))" if "glmb_ranking" in o.files else ""))
     if "lmb" in filters and "lmb_hypotheses" in o.files:
-        say(f"jaxtrack's LMB keeps H = {int(o['lmb_hypotheses'])} hypotheses, ranking {o['lmb_ranking']} "
-            "(the study: 256, GibbsSampling(64, 16))")
+        say(f"jaxtrack's LMB keeps H = {int(o['lmb_hypotheses'])} hypotheses, ranking {o['lmb_ranking']}"
+            + (f", {int(o['lmb_components'])} Gaussian components a label" if "lmb_components" in o.files else "")
+            + " (the study: 256, GibbsSampling(64, 16), 1 component)")
     stats = {}
     for name in filters:
         r = np.load(refs[name]) if os.path.exists(refs[name]) else {}
@@ -444,7 +449,9 @@ def main():
                    "(default the study's, 2x8)")
     p.add_argument("--lmb-gibbs", default=None, help="the LMB's hypotheses by GibbsSampling(CHAINS, SWEEPS), given "
                    "as CHAINSxSWEEPS (default the study's: 64x16)")
-    p.add_argument("--lmb-hypotheses", type=int, default=None, help="jaxtrack's LMB hypothesis budget (default the study's, 32)")
+    p.add_argument("--lmb-hypotheses", type=int, default=None, help="jaxtrack's LMB hypothesis budget (default the study's, 256)")
+    p.add_argument("--lmb-components", type=int, default=None,
+                   help="the Gaussian components each of jaxtrack's LMB labels keeps (default the study's)")
     p.add_argument("--gate", type=float, default=None,
                    help="jaxtrack's Mahalanobis gate in σ (default the study's, 4; the port's is sqrt(32.24) = 5.68)")
     p.add_argument("--tag", default="", help="suffix of jaxtrack's result file (ours{TAG}.npz) and of --out's default")
@@ -464,7 +471,8 @@ def main():
     if "ours" in stages:
         ours(args.workdir, args.ours_runs, glmb_hypotheses=args.glmb_hypotheses,
              filters=[f for f in args.filters.split(",") if f], tag=args.tag, gate=args.gate,
-             gibbs=args.gibbs, lmb_gibbs=args.lmb_gibbs, lmb_hypotheses=args.lmb_hypotheses)
+             gibbs=args.gibbs, lmb_gibbs=args.lmb_gibbs, lmb_hypotheses=args.lmb_hypotheses,
+             lmb_components=args.lmb_components)
     if "reference" in stages:
         reference(args)
     if "compare" in stages:

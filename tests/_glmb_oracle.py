@@ -158,3 +158,53 @@ def lmb_run(case, scans, first_step=0):
         lmb = project(glmb_update(case, hyps, zs))
         out.append(lmb)
     return out
+
+
+def gm_lmb_run(case, scans, first_step=0):
+    """The LMB filter whose labels keep their whole Gaussian mixture (R14's GM implementation
+    without pruning, merging or a cap): ``{label: (r, [(w, m, P)])}`` after each scan, the
+    component weights of a label summing to 1. The δ-GLMB update of a mixture track on ``z``:
+    likelihood ``Σ_c w_c N(z; H m_c, H P_c Hᵀ + R)``, components Kalman-updated with weights
+    ``∝ w_c N(z; ...)``; missed: the mixture as predicted."""
+    lmb = {}
+    out = []
+    for i, zs in enumerate(scans):
+        k = first_step + i
+        pred = {l: (case.ps * r, [(w,) + case.predict(m, P) for w, m, P in comps]) for l, (r, comps) in lmb.items()}
+        B = len(case.birth)
+        for b, (r, m, P) in enumerate(case.birth):
+            pred[k * B + b] = (r, [(1.0, m, P)])
+        labels = [l for l in sorted(pred) if pred[l][0] > 0.0]
+        post = {}  # label -> list of (weight, comps) over hypotheses and associations
+        total = 0.0
+        for chosen in itertools.product([False, True], repeat=len(labels)):
+            w0 = 1.0
+            on = [l for c, l in zip(chosen, labels) if c]
+            for c, l in zip(chosen, labels):
+                w0 *= pred[l][0] if c else 1.0 - pred[l][0]
+            if w0 == 0.0:
+                continue
+            for theta in itertools.product([None] + list(range(len(zs))), repeat=len(on)):
+                used = [j for j in theta if j is not None]
+                if len(used) != len(set(used)):
+                    continue
+                wu, tracks = w0, []
+                for l, j in zip(on, theta):
+                    comps = pred[l][1]
+                    if j is None:
+                        wu *= 1.0 - case.pd
+                        tracks.append((l, comps))
+                    else:
+                        upd = [case.update(m, P, np.asarray(zs[j], float)) for _, m, P in comps]
+                        lik = sum(w * u[2] for (w, _, _), u in zip(comps, upd))
+                        wu *= case.pd * lik / case.kappa
+                        tracks.append((l, [(w * u[2] / lik, u[0], u[1]) for (w, _, _), u in zip(comps, upd)]))
+                total += wu
+                for l, comps in tracks:
+                    post.setdefault(l, []).append((wu, comps))
+        lmb = {}
+        for l, parts in post.items():
+            r = sum(w for w, _ in parts) / total
+            lmb[l] = (r, [(w * wc / total / r, m, P) for w, comps in parts for wc, m, P in comps])
+        out.append(lmb)
+    return out

@@ -28,6 +28,7 @@ from jaxtrack.multitarget import (
     GaussianMixture,
     GLMBState,
     Scenario,
+    VoMaReduction,
     multitarget_monte_carlo,
     run_multitarget,
     score_tracks,
@@ -236,6 +237,61 @@ def test_lmb_projection_equals_the_enumerated_marginals(lmb_exact, seed, m1, m2)
             assert abs(rm - r) <= TOL and np.max(np.abs(mm - m)) <= TOL and np.max(np.abs(Pm - P)) <= TOL, l
 
 
+def _distinct(comps):
+    """A mixture's components with equal Gaussians summed (the oracle repeats a label's component
+    once per hypothesis that holds it)."""
+    out = []
+    for w, m, P in comps:
+        for i, (wo, mo, Po) in enumerate(out):
+            if np.allclose(m, mo, rtol=1e-12, atol=1e-12) and np.allclose(P, Po, rtol=1e-12, atol=1e-12):
+                out[i] = (wo + w, mo, Po)
+                break
+        else:
+            out.append((w, m, P))
+    return out
+
+
+@pytest.mark.parametrize("seed,m1,m2", [(21, 2, 2), (23, 3, 1)])
+def test_lmb_mixtures_equal_the_enumerated_mixtures(seed, m1, m2):
+    """``LMB(max_components=J)`` with nothing pruned or merged keeps each label's whole posterior
+    mixture: existences, component weights, means and covariances equal the enumeration's (the
+    GM-LMB of R14 without reduction) to 1e-10 over two scans, the slot's Gaussian is the mixture's
+    moments and the estimate is the heaviest component's mean."""
+    case, rng = _random_case(seed)
+    scans = [_draw_scan(rng, case, m1), _draw_scan(rng, case, m2)]
+    exact = oracle.gm_lmb_run(case, scans)
+    f = LMB(KalmanFilter(), _model(), max_hypotheses=H_EXACT, max_components=(M_MAX + 1) ** 2,
+            component_reduction=VoMaReduction(0.0, 0.0), **_kwargs(case))
+    state = f.init()
+    for k, pts in enumerate(scans):
+        state, info = _step(f, state, *_scan(pts))
+        assert bool(info.ok)
+        s = jax.tree.map(np.asarray, state)
+        slots = {int(l): i for i, l in enumerate(s.labels[0]) if l >= 0}
+        assert sorted(slots) == sorted(exact[k])
+        for l, (r, comps) in exact[k].items():
+            i = slots[l]
+            assert abs(s.existence[0, i] - r) <= TOL, l
+            want = _distinct(comps)
+            lw = s.component_log_weights[0, i]
+            mine = [(math.exp(lw[c]), s.component_means[0, i, c], s.component_covs[0, i, c])
+                    for c in np.flatnonzero(np.isfinite(lw))]
+            assert len(mine) == len(want), (l, len(mine), len(want))
+            for w, m, P in want:
+                c = min(range(len(mine)), key=lambda c: np.max(np.abs(mine[c][1] - m)))
+                assert abs(mine[c][0] - w) <= TOL and np.max(np.abs(mine[c][1] - m)) <= TOL
+                assert np.max(np.abs(mine[c][2] - P)) <= TOL
+            mean = sum(w * m for w, m, _ in want)
+            cov = sum(w * (P + np.outer(m - mean, m - mean)) for w, m, P in want)
+            assert np.max(np.abs(s.means[0, i] - mean)) <= TOL and np.max(np.abs(s.covs[0, i] - cov)) <= TOL
+    est = jax.tree.map(np.asarray, f.estimates(state))
+    assert est.mask.any()
+    for i in np.flatnonzero(est.mask):
+        comps = _distinct(exact[-1][int(est.ids[i])][1])
+        heaviest = max(comps, key=lambda c: c[0])[1]
+        assert np.max(np.abs(est.states[i] - heaviest)) <= TOL
+
+
 @pytest.mark.parametrize("seed,prior", [(31, False), (32, True)])
 def test_small_budget_keeps_exactly_the_heaviest_hypotheses(glmb_small, seed, prior):
     case, rng = _random_case(seed, one_birth=not prior)
@@ -295,6 +351,9 @@ def test_input_errors_name_the_argument(glmb_small):
             GLMB(KalmanFilter(), model, **args)
     with pytest.raises(InputError, match="clutter"):
         GLMB(KalmanFilter(), model, **{**kw, "clutter_density": None, "max_hypotheses": 4})
+    for name, value in [("max_components", 0), ("max_components", 1.5), ("component_reduction", "vo-ma")]:
+        with pytest.raises(InputError, match=name):
+            LMB(KalmanFilter(), model, **{**kw, "max_hypotheses": 4, name: value})
     # A traced probability out of range: no exception inside the scan, the step's `ok` is False.
     bad = eqx.tree_at(lambda g: g.prob_detect, glmb_small, jnp.asarray(1.5))
     _, info = _step(bad, bad.init(), *_scan([[0.0, 0.0]]))

@@ -33,7 +33,10 @@ the fixed-capacity track table and the trackers (GNN, JPDA, JIPDA) as one step a
 - ``_glmb``: :class:`GLMB` (the δ-GLMB filter of Vo & Vo 2013 with the joint prediction–update of
   Vo, Vo & Hoang 2017: Murty's ranked assignment over all prior hypotheses, fixed track and
   hypothesis budgets) and :class:`LMB` (Reuter et al. 2014: the same step projected to an LMB),
-  the projection strategies :class:`DeltaGLMB`, :class:`LMBProjection`, :class:`GLMBState`;
+  :class:`GLMBState`;
+- ``_labelled_projection``: what they keep of the ranked posterior, the projection strategies
+  :class:`DeltaGLMB` and :class:`LMBProjection` (each label a Gaussian mixture of at most
+  ``max_components`` components);
 - ``_labelled_ranking``: their hypothesis-generation strategies :class:`MurtyRanking` (the
   default) and :class:`GibbsSampling` (VVH17's Gibbs sampler);
 - ``_two_sensors``: :class:`TwoSensorScenario`, :func:`simulate_two_sensors` (the same targets
@@ -111,10 +114,12 @@ from ._glmb import (
     GLMB as GLMB,
     LMB as LMB,
     AbstractLabelledFilter as AbstractLabelledFilter,
-    AbstractLabelledProjection as AbstractLabelledProjection,
-    DeltaGLMB as DeltaGLMB,
     GLMBState as GLMBState,
     GLMBStepInfo as GLMBStepInfo,
+)
+from ._labelled_projection import (
+    AbstractLabelledProjection as AbstractLabelledProjection,
+    DeltaGLMB as DeltaGLMB,
     LMBProjection as LMBProjection,
 )
 from ._labelled_ranking import (
