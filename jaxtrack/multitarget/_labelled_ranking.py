@@ -87,6 +87,8 @@ class GibbsSampling(AbstractLabelledRanking):
 
     def hypotheses(self, cost, num, offsets, valid_parents, step):
         key = jax.random.fold_in(jax.random.key(self.seed), step)
+        # The cost's "missed" and "absent" blocks are diagonal: a chain redraws a candidate over
+        # the A measurement columns and its own two, not all A + 2P.
         return gibbs_assignments(cost, num, key=key, num_chains=self.num_chains, num_sweeps=self.num_sweeps,
                                  offsets=offsets, valid_parents=valid_parents,
-                                 weight_exponent=self.weight_exponent)
+                                 weight_exponent=self.weight_exponent, private_columns=2)
