@@ -321,7 +321,7 @@ def compare(args) -> str:
     if "lmb" in filters and "lmb_hypotheses" in o.files:
         say(f"jaxtrack's LMB keeps H = {int(o['lmb_hypotheses'])} hypotheses, ranking {o['lmb_ranking']}"
             + (f", {int(o['lmb_components'])} Gaussian components a label" if "lmb_components" in o.files else "")
-            + " (the study: 256, GibbsSampling(64, 16), 1 component)")
+            + " (the study: 256, GibbsSampling(64, 16), 10 components)")
     stats = {}
     for name in filters:
         r = np.load(refs[name]) if os.path.exists(refs[name]) else {}
