@@ -75,7 +75,8 @@ def _chains(work, allowed, start, keys, num_sweeps, shared=None):
     tiny = jnp.finfo(weights.dtype).tiny
     # How many rows hold each shared column: a row's "taken by the others" is this minus its own
     # (0 on the private columns, which only their row can hold).
-    counts0 = jnp.sum((start[:, :, None] == cols[None, None]) & is_shared[None, None], axis=1, dtype=jnp.int32)  # (T, C)
+    held = (start[:, :, None] == cols[None, None]) & is_shared[None, None]
+    counts0 = jnp.sum(held, axis=1, dtype=jnp.int32)  # (T, C)
 
     # Cumulative sums in two levels: within blocks of _BLOCK columns, then the blocks' totals, each
     # a product with a small triangular matrix: T·C·(b + C/b) multiply-adds instead of the T·C² of
@@ -126,6 +127,7 @@ def _chains(work, allowed, start, keys, num_sweeps, shared=None):
 
     _, states = jax.lax.scan(sweep, (start, counts0), jnp.arange(num_sweeps))
     return jnp.swapaxes(states, 0, 1)
+
 
 def _check_private(private_columns, cost, R: int) -> int:
     """``private_columns`` as a static int ``Q ≥ 0`` with ``Q·R ≤ C``; for a concrete ``cost``, every

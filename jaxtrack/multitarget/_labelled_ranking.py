@@ -50,8 +50,10 @@ class GibbsSampling(AbstractLabelledRanking):
     the ``P`` candidates are shared over the prior hypotheses in proportion to ``w_h^α``
     (``α = weight_exponent``; ½, VVH17's ``√w_h``, by default), each candidate redrawn from
     ``η_i(·)`` over the choices the other candidates leave free. Not exact (the ``K`` best only
-    once the samples cover them); costs ``O(R·num_chains·num_sweeps·P·(A + 2P))`` per scan plus
-    ``R`` Hungarian solves, so a large ``max_hypotheses`` is affordable.
+    once the samples cover them); costs ``O(R·num_chains·num_sweeps·P·(A + 2))`` per scan (a
+    candidate is redrawn over the ``A`` measurement columns and its own "missed" and "absent",
+    ``private_columns=2``) plus ``R`` Hungarian solves, so a large ``max_hypotheses`` is
+    affordable.
 
     **Arguments:** ``num_chains``, ``num_sweeps``: static ints ``≥ 1`` (``R·(1 + num_chains·
     num_sweeps)`` samples a scan, ``R`` the prior hypothesis slots); ``seed``: int, the PRNG seed;

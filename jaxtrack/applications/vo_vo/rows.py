@@ -19,8 +19,8 @@ from .scenario import LABELS, METHODS
 
 # Margins. Measured with 20 runs (key 13) at the study's budgets (N = 16; δ-GLMB H = 128, LMB
 # H = 256, both by Gibbs sampling; the LMB's labels Gaussian mixtures of up to 10 components),
-# 127 s for both filters on one core (2026-12-07; 107 s with the sampler's private columns, the same rows): time-averaged GOSPA mean (upper 95%) 87.5
-# (98.3) m δ-GLMB, 83.6 (93.9) m LMB; mean |cardinality bias| 0.30 and 0.21; track switches a run
+# 127 s for both filters on one core (2026-12-07; 107 s with the sampler's private columns, the
+# same rows): time-averaged GOSPA mean (upper 95%) 87.5 (98.3) m δ-GLMB, 83.6 (93.9) m LMB; mean |cardinality bias| 0.30 and 0.21; track switches a run
 # 12.3 and 8.25 (breaks 2.10, 2.55); no capacity event. (The LMB with one Gaussian a label: 84.5
 # (95.0) m, 0.21, 9.15 switches; by Murty at H = 32: 84.9 (95.7) m, 0.22, 8.35 switches.) The
 # margins leave about 15% (GOSPA, switches) and 25–40% (cardinality).
