@@ -280,7 +280,7 @@ def test_errors_name_the_argument():
     for kwargs, match in [
         (dict(good, num_chains=0), "num_chains"), (dict(good, num_chains=2.5), "num_chains"),
         (dict(good, num_sweeps=0), "num_sweeps"), (dict(good, num_sweeps=True), "num_sweeps"),
-        (dict(good, key=0), "key"), (dict(good, key=jnp.zeros(2)), "key"),
+        (dict(good, key=0.5), "key"), (dict(good, key=jnp.zeros(2)), "key"),
         (dict(good, key=jax.random.split(key, 3)), "key"),
         (dict(good, offsets=np.zeros(2)), "offsets"), (dict(good, valid_parents=np.ones(3, bool)), "valid_parents"),
     ]:

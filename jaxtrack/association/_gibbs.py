@@ -17,19 +17,19 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from .._validation import InputError, is_concrete
+from .._validation import InputError, as_key, is_concrete
 from ._murty import KBestAssignments, _solve, check_count, check_problem
 
 
 def _check_key(key) -> Array:
-    """``key`` as a typed PRNG key of shape ``()`` (a legacy ``uint32`` ``(2,)`` key is wrapped)."""
-    if isinstance(key, jax.Array) and jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        if key.shape != ():
-            raise InputError(f"`key` must be ONE PRNG key (shape ()); got shape {key.shape} (vmap over a batch).")
-        return key
-    if isinstance(key, jax.Array) and key.dtype == jnp.uint32 and key.shape == (2,):
-        return jax.random.wrap_key_data(key)
-    raise InputError(f"`key` must be a PRNG key (jax.random.key(seed) or jax.random.PRNGKey(seed)); got {key!r}.")
+    """``key`` as ONE typed PRNG key of shape ``()``: :func:`~jaxtrack._validation.as_key` (a typed
+    key, a legacy ``uint32`` ``(2,)`` key, wrapped, or an int seed), then one key, not a batch."""
+    key = as_key(key)
+    if not jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        key = jax.random.wrap_key_data(key)
+    if key.shape != ():
+        raise InputError(f"`key` must be ONE PRNG key (shape ()); got shape {key.shape} (vmap over a batch).")
+    return key
 
 
 def _chain(work, allowed, start, key, num_sweeps, shared=None):
@@ -236,7 +236,8 @@ def gibbs_assignments(
       weight (the sampler draws ``∝ exp(−cost)``, so the scale matters, unlike Murty's);
       ``+inf`` (any non-finite entry) marks a forbidden pair.
     - ``k``: static Python int ``≥ 1``, the most solutions returned.
-    - ``key``: a PRNG key (``jax.random.key`` or a legacy ``jax.random.PRNGKey``).
+    - ``key``: a PRNG key (``jax.random.key`` or a legacy ``jax.random.PRNGKey``) or an int seed,
+      as everywhere in jaxtrack.
     - ``num_chains``: static int ``≥ 1``, chains per parent slot on average (``P·num_chains`` in
       all, shared as above); ``num_sweeps``: static int ``≥ 1``,
       sweeps per chain (each a sample).
