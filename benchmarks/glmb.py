@@ -52,10 +52,21 @@ error are deterministic, equal in both runs):
 
 Since 2026-12-07 21:00 the chains are one budget of ``H·chains`` shared over the prior hypotheses by
 ``√w`` (not ``chains`` per slot), so the Gibbs rows above are of the earlier sampler. Rerun on the
-same 8 runs (benchmarks/measured/glmb_gibbs.txt, end): GLMB 128, 2 × 8: 2.3 s one run, 16.32 m,
-GOSPA 95.98 m, cardinality error 0.549 (worse on these 8 runs; on the study's 100 runs against the
-labeledRFS port, better: OSPA 14.78 against 16.23 m, benchmarks/measured/labelled_reference.txt);
-GLMB 512, 1 × 4: 5.8 s, 12.79 m, 80.76 m, 0.215; LMB 256, 64 × 16: 0.80 s, 13.23 m, 82.51 m, 0.234.
+same 8 runs at 23:45 (benchmarks/measured/glmb_gibbs.txt, end; the sampler then drew each candidate
+over its ``A + 2`` possible columns, ``private_columns=2``):
+
+| filter, ranking | ``H`` | chains × sweeps | one run | batch of 8, per run | mean OSPA | mean GOSPA | mean abs. cardinality error |
+|---|---|---|---|---|---|---|---|
+| GLMB, Gibbs | 128 | 2 × 8 | 1.59 s | 2.07 s | 16.32 m | 95.98 m | 0.549 |
+| GLMB, Gibbs | 256 | 1 × 8 | 2.70 s | 3.23 s | 14.25 m | 87.27 m | 0.346 |
+| GLMB, Gibbs | 512 | 1 × 4 | 5.73 s | 5.51 s | 12.79 m | 80.76 m | 0.215 (1 capacity event) |
+| LMB, Gibbs, 1 component | 256 | 64 × 16 | 0.48 s | 0.60 s | 13.23 m | 82.51 m | 0.234 (3 capacity events) |
+| LMB, Gibbs, 10 components | 256 | 64 × 16 | 0.58 s | 0.72 s | 12.80 m | 80.34 m | 0.205 (6 capacity events) |
+
+(The LMB's capacity events are lingering birth labels at the library's existence threshold 1e-5;
+the study prunes at 1e-3 and has none.) GLMB 128, 2 × 8 is worse than the per-slot sampler on these
+8 runs (16.32 against 14.75 m) and better on the study's 100 runs against the labeledRFS port (OSPA
+14.78 against 16.23 m, benchmarks/measured/labelled_reference.txt).
 
 Gibbs at ``H = 128`` is faster than Murty at ``H = 32`` (no ``P³`` subproblems, a batch no longer
 waits for the slowest run's ``while_loop``) and closes most of the gap to the LMB (OSPA 18.5 →
@@ -81,7 +92,7 @@ start it again once it has moved away; the LMB keeps such labels with a small ``
 Usage::
 
     python benchmarks/glmb.py [--runs 8] [--hypotheses 32] [--tracks 16] [--columns 24] [--gate 4]
-        [--ranking murty|gibbs] [--chains 4] [--sweeps 8] [--gibbs-seed 0] [--filters GLMB LMB]
+        [--ranking murty|gibbs] [--chains 4] [--sweeps 8] [--gibbs-seed 0] [--components 1] [--filters GLMB LMB]
 """
 
 from __future__ import annotations
@@ -106,8 +117,12 @@ def _filters(scen, st, args):
           "birth": st.birth, "max_tracks": args.tracks, "max_hypotheses": args.hypotheses, "gate": args.gate,
           "assignment_measurements": args.columns, "existence_threshold": args.existence_threshold,
           "ranking": ranking}
-    make = {"GLMB": mt.GLMB, "LMB": mt.LMB}
-    return {name: make[name](KalmanFilter(), scen.model, **kw) for name in args.filters}
+    out = {}
+    if "GLMB" in args.filters:
+        out["GLMB"] = mt.GLMB(KalmanFilter(), scen.model, **kw)
+    if "LMB" in args.filters:
+        out["LMB"] = mt.LMB(KalmanFilter(), scen.model, max_components=args.components, **kw)
+    return out
 
 
 def _best(fn, repeats):
@@ -133,6 +148,7 @@ def main():
     p.add_argument("--chains", type=int, default=4, help="Gibbs: chains per prior hypothesis slot (H·chains in all, shared by sqrt(w))")
     p.add_argument("--sweeps", type=int, default=8, help="Gibbs: sweeps per chain (each a sample)")
     p.add_argument("--gibbs-seed", type=int, default=0)
+    p.add_argument("--components", type=int, default=1, help="LMB: Gaussian components a label (1: moment matched)")
     p.add_argument("--filters", nargs="+", choices=("GLMB", "LMB"), default=["GLMB", "LMB"])
     args = p.parse_args()
     scen, st = mt.vo_vo_linear(0)
@@ -142,6 +158,7 @@ def main():
     print(f"vo_vo_linear: {scen.num_steps} scans, {args.runs} runs, M = {scen.max_measurements} slots; "
           f"H = {args.hypotheses}, N = {args.tracks}, A = {args.columns}, gate {args.gate}; ranking {args.ranking}"
           + (f" ({args.chains} chains x {args.sweeps} sweeps per prior hypothesis slot)" if args.ranking == "gibbs" else "")
+          + (f"; LMB {args.components} components a label" if "LMB" in args.filters else "")
           + f"; device {jax.devices()[0]}")
     for name, f in _filters(scen, st, args).items():
         one = jax.jit(lambda zz, vv, f=f: scan_method(f, zz, vv, _record_estimates)[1])
