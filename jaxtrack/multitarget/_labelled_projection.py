@@ -85,9 +85,15 @@ def _scatter(present, labels, r, N, *arrays):
 
 
 def _merge_equal(labels, means, covs, log_w, active):
-    """Hypotheses with the same labels and the same Gaussians (to 1e-9 relative: the same history
-    gives the same arithmetic) merged into the first of each group, weights summed and the rows
-    renormalised. ``labels`` ``(K, N)`` (−1 empty), ``means`` ``(K, N, n)``, ``covs``
+    """Hypotheses with the same labels and equal Gaussians merged into the first of each group,
+    weights summed and the rows renormalised. "Equal": for every slot, two fixed random projections
+    ``p = Wᵀx`` of its ``d = n + n²`` values agree within ``1e-9·|W|ᵀ(1 + |x|)``, i.e. to about
+    1e-9 of the slot's scale (its largest values, the covariances). That merges the same history
+    (the same arithmetic) and histories a Kalman filter has forgotten to that precision (an
+    association many scans back); summing their weights changes the mixture by about the
+    tolerance, and frees hypothesis budget. (A value-by-value test, each value within 1e-9 of
+    itself, merged fewer: on Vo & Vo's benchmark at H = 128 the δ-GLMB's OSPA against the
+    labeledRFS port went from +0.81 ± 0.22 m with it to +0.48 ± 0.20 m with this.) ``labels`` ``(K, N)`` (−1 empty), ``means`` ``(K, N, n)``, ``covs``
     ``(K, N, n, n)``. **Returns** ``(log_w (K,), active (K,))``."""
     big = jnp.iinfo(jnp.int32).max
     order = jnp.argsort(jnp.where(labels >= 0, labels, big), axis=1, stable=True)
@@ -96,10 +102,8 @@ def _merge_equal(labels, means, covs, log_w, active):
     m = jnp.take_along_axis(means, order[..., None], axis=1)
     c = jnp.take_along_axis(covs, order[..., None, None], axis=1).reshape(m.shape[:2] + (-1,))
     x = jnp.concatenate([m, c], axis=-1)  # (K, N, d), d = n + n²
-    # Two fixed random projections of each slot's d values stand in for the values (O(K²·N·2), not
-    # O(K²·N·d): 18.5 → 5.1 ms at K = 512, 1.5 → 0.75 ms at 128). Their tolerance is what "every value within 1e-9·(1 + |x|)"
-    # implies for the projection, so every pair the value-by-value test merges is merged; a pair
-    # it would not merge needs both projections to agree by coincidence (about 1e-18 a pair).
+    # Two projections, not the d values: O(K²·N·2), not O(K²·N·d) (18.5 → 5.1 ms at K = 512,
+    # 1.5 → 0.75 ms at 128). Two, so that distinct slots agree in both only by coincidence.
     W = jnp.asarray(np.random.default_rng(20261207).normal(size=(x.shape[-1], 2)), x.dtype)  # fixed, (d, 2)
     proj = x @ W
     tol = 1e-9 * ((1.0 + jnp.abs(x)) @ jnp.abs(W))  # (K, N, 2)
@@ -164,8 +168,9 @@ class AbstractLabelledProjection(eqx.Module):
 
 class DeltaGLMB(AbstractLabelledProjection):
     """The δ-GLMB filter's projection: none — the ``H`` best hypotheses, pruned below
-    ``hypothesis_threshold`` (normalised weight), equal ones merged (same labels and Gaussians:
-    they differed only in an absent track's history), renormalised (VVH17 Sec. IV). A detected
+    ``hypothesis_threshold`` (normalised weight), equal ones merged (same labels and Gaussians
+    equal to about 1e-9 of their scale: they differed only in an absent track's history, or in
+    an association long forgotten; :func:`_merge_equal`), renormalised (VVH17 Sec. IV). A detected
     track's Gaussian is its prediction updated on its measurement, a missed one keeps the
     prediction; one Gaussian per (hypothesis, label): the mixture over association histories is
     the hypotheses.
