@@ -78,14 +78,20 @@ def glmb_predict(case, hyps, k):
     return out
 
 
+def association_maps(num_tracks, num_measurements):
+    """Every map of ``num_tracks`` tracks to ``None`` (missed) or a measurement index, one-to-one
+    on the measurements."""
+    for theta in itertools.product([None] + list(range(num_measurements)), repeat=num_tracks):
+        used = [j for j in theta if j is not None]
+        if len(used) == len(set(used)):
+            yield theta
+
+
 def glmb_update(case, hyps, zs):
     """VV13's δ-GLMB update: every association map, normalised. **Returns** the hypotheses."""
     out = []
     for w, tracks in hyps:
-        for theta in itertools.product([None] + list(range(len(zs))), repeat=len(tracks)):
-            used = [j for j in theta if j is not None]
-            if len(used) != len(set(used)):
-                continue
+        for theta in association_maps(len(tracks), len(zs)):
             wu, new = w, []
             for (l, m, P), j in zip(tracks, theta):
                 if j is None:
@@ -184,10 +190,7 @@ def gm_lmb_run(case, scans, first_step=0):
                 w0 *= pred[l][0] if c else 1.0 - pred[l][0]
             if w0 == 0.0:
                 continue
-            for theta in itertools.product([None] + list(range(len(zs))), repeat=len(on)):
-                used = [j for j in theta if j is not None]
-                if len(used) != len(set(used)):
-                    continue
+            for theta in association_maps(len(on), len(zs)):
                 wu, tracks = w0, []
                 for l, j in zip(on, theta):
                     comps = pred[l][1]

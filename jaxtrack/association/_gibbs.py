@@ -32,11 +32,11 @@ def _check_key(key) -> Array:
     return key
 
 
-def _chain(work, allowed, start, key, num_sweeps, shared=None):
+def _chain(work, allowed, start, key, num_sweeps):
     """One chain on one ``(R, C)`` cost matrix: ``num_sweeps`` systematic scans over the rows from
     the injective assignment ``start`` ``(R,)``. **Returns** the state after each sweep
     ``(num_sweeps, R)`` int32. (:func:`_chains` for one chain.)"""
-    return _chains(work[None], allowed[None], start[None], key[None], num_sweeps, shared)[0]
+    return _chains(work[None], allowed[None], start[None], key[None], num_sweeps)[0]
 
 
 _BLOCK = 8  # columns a block of the draws' two-level cumulative sums (_chains)

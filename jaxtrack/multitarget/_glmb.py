@@ -63,9 +63,9 @@ keeps the prediction) and keeps:
 
 - :class:`DeltaGLMB`: the ``H`` best hypotheses, pruned below ``hypothesis_threshold``;
   surviving tracks keep their slot, births go to the hypothesis's free slots in birth order;
-  hypotheses that became equal (same labels and the same Gaussians: they differed only in the
-  history of a track that is now absent) are merged, their weights summed, as Vo & Vo's
-  implementation does; renormalised;
+  hypotheses that became equal (same labels and Gaussians equal to about 1e-9 of their scale:
+  they differed only in the history of a track that is now absent, or in an association long
+  forgotten; ``_merge_equal``) are merged, their weights summed; renormalised;
 - :class:`LMBProjection`: the LMB of the (truncated) δ-GLMB posterior (R14 Sec. III, the
   LMB approximation that matches the first moment of the labelled posterior):
   ``r_ℓ = Σ_h w_h 1[ℓ ∈ I_h]`` and ``p_ℓ = Σ_h w_h 1[ℓ ∈ I_h] p_h(·, ℓ) / r_ℓ``, a mixture

@@ -326,9 +326,11 @@ class LMBProjection(AbstractLabelledProjection):
         labels, ex, means, covs, *comps, n_drop = _scatter(keep, rk.labels[0], r, N, mean, cov, *comps)
         labels = jnp.where(ex > 0.0, labels, -1)
         zero = jnp.zeros((1,), dtype)
-        comps = None if J == 1 else tuple(c[None] for c in comps)
-        if comps is not None:  # free slots: no component
-            comps = (jnp.where((labels >= 0)[None, :, None], comps[0], -jnp.inf),) + comps[1:]
+        if J == 1:
+            comps = None
+        else:  # free slots: no component
+            slot_lw, slot_m, slot_c = comps
+            comps = (jnp.where((labels >= 0)[:, None], slot_lw, -jnp.inf)[None], slot_m[None], slot_c[None])
         return labels[None], ex[None], means[None], covs[None], zero, jnp.ones((1,), bool), n_drop, comps
 
     def estimates(self, f, state: GLMBState) -> Estimates:

@@ -15,8 +15,8 @@ BELOW it at H = 512 (8.4 s; closer to the truth than the port, whose 1,000 sampl
 too; 17 scans in 100 runs had gated measurements beyond the 24 columns). The LMB keeps
 :data:`LMB_COMPONENTS` Gaussian components a label (the port's ``L_max``) and is +0.05 ± 0.05 m
 from the port, 98 of 100 scans within 2 SE (cardinality 99/100), at 0.6 s a run; with one Gaussian
-a label (moment matched) it was +0.49 ± 0.17 m, 87/100. (The H = 256 and 512 figures are of the sampler
-before its private columns and of the earlier merge.) The LMB prunes labels at
+a label (moment matched) it was +0.49 ± 0.17 m, 87/100. (The H = 256 and 512 figures are of
+the sampler before its private columns and of the earlier merge.) The LMB prunes labels at
 ``r`` ≤ :data:`LMB_EXISTENCE_THRESHOLD` (the toolbox's track threshold): at the library's 1e-5
 lingering birth labels filled the 16 slots (18 capacity events in 8 runs).
 """
