@@ -10,13 +10,13 @@ its chains shared over the prior hypotheses by √w, the LMB 256 from 64 chains 
 Against the labeledRFS port on the same 100 runs (benchmarks/labelled_reference.py,
 benchmarks/measured/labelled_reference.txt, one core each): the δ-GLMB's time-averaged OSPA is
 +0.48 ± 0.20 m above the port's (1.4 s a run; +0.81 ± 0.22 m before equal hypotheses merged at 1e-9
-of the slot's scale), +0.24 ± 0.18 m at H = 256 (4.2 s) and 0.45 ± 0.14 m
+of the slot's scale), +0.17 ± 0.18 m at H = 256 (2.2 s) and 0.45 ± 0.14 m
 BELOW it at H = 512 (8.4 s; closer to the truth than the port, whose 1,000 samples are a budget
 too; 17 scans in 100 runs had gated measurements beyond the 24 columns). The LMB keeps
 :data:`LMB_COMPONENTS` Gaussian components a label (the port's ``L_max``) and is +0.05 ± 0.05 m
 from the port, 98 of 100 scans within 2 SE (cardinality 99/100), at 0.6 s a run; with one Gaussian
-a label (moment matched) it was +0.49 ± 0.17 m, 87/100. (The H = 256 and 512 figures are of
-the sampler before its private columns and of the earlier merge.) The LMB prunes labels at
+a label (moment matched) it was +0.49 ± 0.17 m, 87/100. (The H = 512 figures are of the sampler
+before its private columns and of the earlier merge.) The LMB prunes labels at
 ``r`` ≤ :data:`LMB_EXISTENCE_THRESHOLD` (the toolbox's track threshold): at the library's 1e-5
 lingering birth labels filled the 16 slots (18 capacity events in 8 runs).
 """
